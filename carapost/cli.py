@@ -1,0 +1,125 @@
+"""The ``carapost`` command line (CONTRACT section 2).
+
+Each subcommand imports what it needs when it runs, so headless commands never
+load Qt.  A bad or missing input exits with status 2 and one line on stderr
+naming the file and the problem; tracebacks are for bugs only.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from . import __version__
+from .core.errors import CaraError
+
+
+def _cmd_properties(args) -> int:
+    from .core.properties import GROUPS, PROPERTY_TABLE, Properties
+
+    props = Properties()
+    if args.project:
+        from .io.cara import load_project
+
+        props = load_project(args.project).properties
+    rows = [{"group": p.group, "group_title": GROUPS[p.group], "property": p.name, "title": p.title,
+             "key": p.key, "type": p.type.__name__, "value": props[p.key], "default": p.default,
+             "minimum": p.minimum, "maximum": p.maximum, "unit": p.unit, "help": p.help}
+            for p in PROPERTY_TABLE]
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    group = None
+    for r in rows:
+        if r["group"] != group:
+            group = r["group"]
+            print(f"[{r['group_title']}]  ({group})")
+        unit = f" {r['unit']}" if r["unit"] else ""
+        mark = "" if r["value"] == r["default"] else "   (default " + _fmt(r["default"]) + ")"
+        print(f"  {r['key']:<58} = {_fmt(r['value'])}{unit}{mark}")
+    return 0
+
+
+def _fmt(v) -> str:
+    return str(v).lower() if isinstance(v, bool) else f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _cmd_info(args) -> int:
+    from .info import describe
+
+    info = describe(args.file)
+    if args.json:
+        print(json.dumps(info, indent=1, default=str))
+    else:
+        _print_tree(info)
+    return 0
+
+
+def _print_tree(d, indent: int = 0) -> None:
+    pad = "  " * indent
+    for k, v in d.items():
+        if isinstance(v, dict):
+            print(f"{pad}{k}:")
+            _print_tree(v, indent + 1)
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            print(f"{pad}{k}:")
+            for i, item in enumerate(v):
+                print(f"{pad}  [{i}]")
+                _print_tree(item, indent + 2)
+        else:
+            print(f"{pad}{k}: {v}")
+
+
+def _cmd_bench(args) -> int:
+    from .bench import run_benchmarks
+
+    return run_benchmarks(json_lines=args.json, only=args.only, quick=args.quick)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every subcommand."""
+    ap = argparse.ArgumentParser(prog="carapost", description="Facial capture clean-up: blobs to labelled 3D markers.")
+    ap.add_argument("--version", action="version", version=f"carapost {__version__}")
+    sub = ap.add_subparsers(dest="command")
+
+    p = sub.add_parser("properties", help="every property group, property, value and default")
+    p.add_argument("project", nargs="?", help="a .cara project (default: the defaults)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_properties)
+
+    p = sub.add_parser("info", help="what a .pico, .xcp, .cara or .c3d file holds")
+    p.add_argument("file")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("bench", help="run the benchmarks (one JSON object per line with --json)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--quick", action="store_true", help="small sizes, for a smoke test")
+    p.add_argument("--only", action="append", help="run only benchmarks whose module name contains this")
+    p.set_defaults(func=_cmd_bench)
+
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``carapost`` console script."""
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if not getattr(args, "func", None):
+        ap.print_help()
+        return 0
+    try:
+        return int(args.func(args) or 0)
+    except CaraError as e:
+        print(f"carapost: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("carapost: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
