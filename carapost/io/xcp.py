@@ -296,8 +296,7 @@ def read_xcp(path) -> XcpFile:
     ctx = _Ctx(path)
     # No entity expansion or network access: a calibration file has no business
     # with either, and this keeps hostile XML harmless.
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, remove_blank_text=False,
-                             huge_tree=True)
+    parser = etree.XMLParser(resolve_entities=False, no_network=True, remove_blank_text=False)
     try:
         tree = etree.parse(str(path), parser)
     except OSError as exc:
@@ -411,8 +410,8 @@ def _keyframe_attrs(kf: XcpKeyFrame) -> dict:
             or not np.array_equal(cam.distortion, orig.distortion)):
         # A changed model replaces the old attribute(s): leaving a stale one
         # would give readers two disagreeing distortions.
-        remove = ["VICON_RADIAL", "VICON_RADIAL2"]
         rad = _radial_attr(cam, old)
+        remove = [a for a in ("VICON_RADIAL", "VICON_RADIAL2") if rad is None or a != rad[0]]
         if rad is not None:
             updates[rad[0]] = rad[1]
     return _merge(old, updates, remove)
@@ -507,8 +506,21 @@ def _to_bytes(xcp: XcpFile) -> bytes:
             c.tail = "\n\n  "
         if len(root):
             root[-1].tail = "\n\n"
-    body = etree.tostring(tree, encoding="UTF-8", xml_declaration=False)
-    return _XML_HEADER + body + b"\n"
+    # Top-level comments / processing instructions each on their own line (lxml
+    # keeps no whitespace outside the root element).
+    parts = [_XML_HEADER]
+    doctype = tree.docinfo.doctype
+    if doctype:
+        parts.append(doctype.encode("utf-8") + b"\n")
+    for sib in reversed(list(root.itersiblings(preceding=True))):
+        sib.tail = None
+        parts.append(etree.tostring(sib, encoding="UTF-8", xml_declaration=False) + b"\n")
+    root.tail = None
+    parts.append(etree.tostring(root, encoding="UTF-8", xml_declaration=False) + b"\n")
+    for sib in root.itersiblings():
+        sib.tail = None
+        parts.append(etree.tostring(sib, encoding="UTF-8", xml_declaration=False) + b"\n")
+    return b"".join(parts)
 
 
 def _atomic_write(path: Path, data: bytes) -> None:

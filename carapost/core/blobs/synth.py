@@ -1,0 +1,236 @@
+"""Synthetic face-camera images with painted dots, for training, tests and benchmarks.
+
+The generator draws what a head-mounted camera sees close up: skin with smooth
+shading and fine texture, painted markers (black or white ellipses) and the
+confusers a face offers — nostrils, eye corners, eyebrows, hair strands, the
+edge of the helmet brim and specular highlights.  Markers are rendered by
+supersampled coverage, then the whole image is blurred (optics) and noise is
+added (sensor), so the true centre of each marker is known exactly.
+
+Coordinates: pixel centres are at integer coordinates (OpenCV's convention).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass
+class SynthImage:
+    """An image and its ground truth.
+
+    Attributes
+    ----------
+    image : ndarray (H, W) uint8
+    centres : ndarray (N, 2) float64
+        True centres (x, y) of the markers that count as visible.
+    axes : ndarray (N, 2)
+        Semi-axes (a >= b) of those markers, pixels.
+    hidden : ndarray (M, 2)
+        Centres of markers drawn but mostly occluded (neither required nor false).
+    """
+
+    image: np.ndarray
+    centres: np.ndarray
+    axes: np.ndarray
+    hidden: np.ndarray
+
+
+def _ellipse_coverage(h, w, cx, cy, a, b, ang, ss=4):
+    """Fraction of each pixel inside the ellipse, on the ellipse's bounding box.
+
+    Returns (y0, x0, coverage) with coverage a small float32 array.
+    """
+    r = int(np.ceil(max(a, b))) + 2
+    x0, y0 = int(np.floor(cx)) - r, int(np.floor(cy)) - r
+    n = 2 * r + 1
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    g = (np.arange(n)[:, None] + off[None, :]).ravel()
+    xs = x0 + g - cx
+    ys = y0 + g - cy
+    c, s = np.cos(ang), np.sin(ang)
+    X = xs[None, :] * c + ys[:, None] * s
+    Y = -xs[None, :] * s + ys[:, None] * c
+    inside = ((X / a) ** 2 + (Y / b) ** 2 <= 1.0).astype(np.float32)
+    cov = inside.reshape(n, ss, n, ss).mean(axis=(1, 3))
+    return y0, x0, cov
+
+
+def _paste(dst, y0, x0, cov, value):
+    """Blend ``value`` into ``dst`` with weight ``cov`` (clipped to the image)."""
+    h, w = dst.shape
+    n = cov.shape[0]
+    ya, xa = max(0, y0), max(0, x0)
+    yb, xb = min(h, y0 + n), min(w, x0 + n)
+    if ya >= yb or xa >= xb:
+        return
+    c = cov[ya - y0:yb - y0, xa - x0:xb - x0]
+    reg = dst[ya:yb, xa:xb]
+    if np.ndim(value):
+        value = value[ya:yb, xa:xb]
+    reg *= 1 - c
+    reg += c * value
+
+
+def skin(rng, h, w):
+    """Smoothly shaded skin of random tone with fine texture (float32, 0-255)."""
+    base = rng.uniform(50, 190)
+    small = rng.normal(0, 1, (max(2, h // 64), max(2, w // 64))).astype(np.float32)
+    shade = cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
+    img = base * (1 + rng.uniform(0.05, 0.35) * shade)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    gx, gy = rng.uniform(-0.4, 0.4, 2) * base
+    img += gx * (xx / w - 0.5) + gy * (yy / h - 0.5)
+    tex = cv2.GaussianBlur(rng.normal(0, 1, (h, w)).astype(np.float32), (0, 0), rng.uniform(0.8, 2.0))
+    img += tex * rng.uniform(0.5, 4.0) * base / 100
+    return np.clip(img, 0, 255).astype(np.float32)
+
+
+def _confusers(rng, img, white, count):
+    """Draw face structures that are not markers."""
+    h, w = img.shape
+    for _ in range(count):
+        kind = rng.choice(["nostril", "corner", "brow", "hair", "brim", "spec", "mole"])
+        cx, cy = rng.uniform(0, w), rng.uniform(0, h)
+        if kind == "nostril":
+            a, b = rng.uniform(8, 22), rng.uniform(4, 10)
+            y0, x0, cov = _ellipse_coverage(h, w, cx, cy, a, b, rng.uniform(0, np.pi), ss=2)
+            cov = cv2.GaussianBlur(cov, (0, 0), rng.uniform(1.5, 4))
+            _paste(img, y0, x0, cov, img.mean() * rng.uniform(0.1, 0.5))
+        elif kind == "corner":
+            # A dark wedge: two lines meeting at a point.
+            ang = rng.uniform(0, 2 * np.pi)
+            spread = rng.uniform(0.2, 0.6)
+            L = rng.uniform(15, 50)
+            p0 = np.array([cx, cy])
+            pts = np.array([p0, p0 + L * np.array([np.cos(ang - spread), np.sin(ang - spread)]),
+                            p0 + L * np.array([np.cos(ang + spread), np.sin(ang + spread)])], np.int32)
+            m = np.zeros_like(img)
+            cv2.fillConvexPoly(m, pts, 1.0, lineType=cv2.LINE_AA)
+            m = cv2.GaussianBlur(m, (0, 0), rng.uniform(0.8, 2.0))
+            img[:] = img * (1 - m) + m * img.mean() * rng.uniform(0.15, 0.5)
+        elif kind in ("brow", "hair"):
+            n = rng.integers(15, 60) if kind == "brow" else rng.integers(3, 12)
+            ang = rng.uniform(0, np.pi)
+            m = np.zeros_like(img)
+            for _k in range(n):
+                ox, oy = rng.normal(0, 20 if kind == "brow" else 40, 2)
+                a2 = ang + rng.normal(0, 0.2)
+                L = rng.uniform(6, 20) if kind == "brow" else rng.uniform(30, 120)
+                p = np.array([cx + ox, cy + oy])
+                q = p + L * np.array([np.cos(a2), np.sin(a2)])
+                cv2.line(m, tuple(int(v) for v in p), tuple(int(v) for v in q), 1.0,
+                         int(rng.integers(1, 3)), cv2.LINE_AA)
+            m = cv2.GaussianBlur(m, (0, 0), 0.7)
+            dark = rng.uniform(0.1, 0.5) if not white else rng.uniform(0.1, 0.5)
+            img[:] = img * (1 - m) + m * img.mean() * dark
+        elif kind == "brim":
+            # A straight edge between skin and a dark (or bright) band: the helmet brim.
+            ang = rng.uniform(0, np.pi)
+            yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+            d = (xx - cx) * np.sin(ang) - (yy - cy) * np.cos(ang)
+            wd = rng.uniform(10, 60)
+            m = np.clip(0.5 - np.abs(d - wd / 2) + wd / 2, 0, 1) * (np.abs(d) < wd + 2)
+            m = cv2.GaussianBlur(m.astype(np.float32), (0, 0), rng.uniform(0.6, 1.5))
+            val = rng.uniform(5, 40) if rng.random() < 0.6 else rng.uniform(200, 255)
+            img[:] = img * (1 - m) + m * val
+        elif kind == "spec":
+            sig = rng.uniform(2, 6)
+            y0, x0 = int(cy) - 20, int(cx) - 20
+            g = np.zeros((41, 41), np.float32)
+            g[20, 20] = 1
+            g = cv2.GaussianBlur(g, (0, 0), sig)
+            g /= g.max()
+            _paste(img, y0, x0, g * rng.uniform(0.3, 0.9), 255.0)
+        else:  # mole / pore: tiny soft dark spot, below marker size
+            y0, x0, cov = _ellipse_coverage(h, w, cx, cy, 1.0, 0.8, 0.0)
+            cov = cv2.GaussianBlur(cov, (0, 0), 1.2)
+            _paste(img, y0, x0, cov, img.mean() * 0.5)
+
+
+def render(rng, h=360, w=480, markers=40, white=False, radius=(2.0, 7.0), aspect=(0.55, 1.0),
+           blur=(0.5, 1.4), noise=(0.5, 5.0), confusers=8, occluders=True, min_spacing=None) -> SynthImage:
+    """Render one image with random markers and confusers.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    h, w : int
+        Image size.
+    markers : int
+        Markers to try to place (fewer if spacing forbids).
+    white : bool
+        White markers instead of black.
+    radius, aspect, blur, noise : (low, high)
+        Ranges of the semi-major axis (px), minor/major ratio, optical blur sigma
+        (px) and noise sigma (grey levels).
+    confusers : int
+        Face structures to draw.
+    occluders : bool
+        Let some brim edges cross markers (partial occlusion).
+    """
+    img = skin(rng, h, w)
+    _confusers(rng, img, white, confusers)
+    centres, axes = [], []
+    spacing = min_spacing or 2.5 * radius[1] + 4
+    tries = 0
+    while len(centres) < markers and tries < markers * 20:
+        tries += 1
+        a = rng.uniform(*radius)
+        b = a * rng.uniform(*aspect)
+        cx, cy = rng.uniform(a + 3, w - a - 4), rng.uniform(a + 3, h - a - 4)
+        if centres and np.min(np.hypot(*(np.array(centres) - (cx, cy)).T)) < spacing:
+            continue
+        y0, x0, cov = _ellipse_coverage(h, w, cx, cy, a, b, rng.uniform(0, np.pi))
+        sk = img[int(cy), int(cx)]
+        if white:
+            val = min(255.0, sk + rng.uniform(40, 150))
+        else:
+            val = sk * rng.uniform(0.05, 0.55)
+        if abs(val - sk) < 20:
+            continue
+        _paste(img, y0, x0, cov, val)
+        centres.append((cx, cy))
+        axes.append((a, b))
+    centres = np.array(centres, float).reshape(-1, 2)
+    axes = np.array(axes, float).reshape(-1, 2)
+    hidden = np.zeros((0, 2))
+    if occluders and len(centres) and rng.random() < 0.5:
+        # A brim edge across the image: markers it covers by more than 40 % are "hidden".
+        ang = rng.uniform(0, np.pi)
+        px, py = rng.uniform(0, w), rng.uniform(0, h)
+        yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+        d = (xx - px) * np.sin(ang) - (yy - py) * np.cos(ang)
+        m = cv2.GaussianBlur(np.clip(0.5 - d, 0, 1).astype(np.float32), (0, 0), 0.8)
+        img[:] = img * (1 - m) + m * rng.uniform(5, 40)
+        dc = (centres[:, 0] - px) * np.sin(ang) - (centres[:, 1] - py) * np.cos(ang)
+        gone = dc < 0.2 * axes[:, 0]
+        hidden = centres[gone & (dc > -axes[:, 0] - 2)]
+        keep = dc > axes[:, 0] + 1.5   # fully visible; partial ones are neither required nor false
+        part = ~keep & ~gone
+        hidden = np.vstack([hidden, centres[part]])
+        centres, axes = centres[keep], axes[keep]
+    img = cv2.GaussianBlur(img, (0, 0), rng.uniform(*blur))
+    sig = rng.uniform(*noise)
+    img = img + rng.normal(0, 1, img.shape).astype(np.float32) * sig
+    return SynthImage(np.clip(np.rint(img), 0, 255).astype(np.uint8), centres, axes, hidden)
+
+
+def disc_image(rng, size=41, radius=4.0, blur=1.0, amplitude=100.0, background=60.0, sigma=1.0,
+               centre=None, dark=False):
+    """An isolated blurred disc with Gaussian noise (float32, not quantised), and its centre.
+
+    Signal-to-noise is ``amplitude / sigma``.
+    """
+    if centre is None:
+        centre = (size // 2 + rng.uniform(-0.5, 0.5), size // 2 + rng.uniform(-0.5, 0.5))
+    cx, cy = centre
+    y0, x0, cov = _ellipse_coverage(size, size, cx, cy, radius, radius, 0.0, ss=8)
+    img = np.zeros((size, size), np.float32)
+    _paste(img, y0, x0, cov, 1.0)
+    img = cv2.GaussianBlur(img, (0, 0), blur) if blur > 0 else img
+    s = -1.0 if dark else 1.0
+    img = background + s * amplitude * img + rng.normal(0, sigma, img.shape).astype(np.float32)
+    return img, np.array(centre)
