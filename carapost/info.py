@@ -29,7 +29,7 @@ def describe(path: str | Path) -> dict:
 
         return pico_info(path)
     if ext == ".c3d":
-        from .io.c3d_read import c3d_info
+        from .io.c3d import c3d_info
 
         return c3d_info(path)
     raise CaraError("unknown kind of file (expected .cara, .xcp, .pico or .c3d)", path)

@@ -77,3 +77,11 @@ def test_bad_set_value_exit_2(tmp_path):
 def test_python_dash_m_and_version():
     r = run_cli("--version")
     assert r.returncode == 0 and "carapost" in r.stdout
+
+
+def test_info_on_the_real_facial_c3d(capsys):
+    c3d = shared_file("c3d", "c3dorg_sample29_Facial-Sing.c3d")
+    assert main(["info", str(c3d), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["points"] == 38 and info["frames"] == 3000 and info["rate"] == 100
+    assert info["warnings"]  # the malformed LABELS record is reported, not fatal

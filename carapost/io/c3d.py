@@ -65,6 +65,14 @@ _RESERVED = {
 }
 
 
+# Integer parameters whose 16 bits the guide reads as unsigned.
+_UNSIGNED = {
+    "POINT": {"USED", "FRAMES", "DATA_START"},
+    "ANALOG": {"USED"},
+    "TRIAL": {"ACTUAL_START_FIELD", "ACTUAL_END_FIELD"},
+}
+
+
 def _reserved(group: str, name: str) -> bool:
     if name in _RESERVED.get(group, ()):
         return True
@@ -233,13 +241,32 @@ class _Param:
     value: Any
 
 
+def _record_start_ok(buf: bytes, pos: int, end: int) -> bool:
+    """Whether a record (or the zero fill that ends the section) can start at ``pos``."""
+    if pos == end:
+        return True
+    if pos + 2 > end:
+        return False
+    nlen, gid = struct.unpack_from("bb", buf, pos)
+    if nlen == 0 or gid == 0:
+        return True
+    n = abs(nlen)
+    return pos + 4 + n <= end and all(0x21 <= c <= 0x7E for c in buf[pos + 2:pos + 2 + n])
+
+
 def _parse_parameters(buf: bytes, start: int, end: int, codec: _Codec, warnings: list[str]):
     """Walk the parameter records from ``start`` (just past the 4-byte section header) to ``end``.
 
     Returns ``(groups, params)``: group id -> name, and the parameters read.
-    A malformed record stops the walk (keeping what was read before it), except
-    a parameter whose data is complete but whose description is cut by the
-    record's offset: its value is kept (see sample 29 below).
+
+    Records are chained by their "offset to next" (counted from the offset
+    field itself; 0 marks the last record).  When that offset does not lead to
+    a record, the byte-swapped offset and the record's own content length are
+    tried (c3d.org sample 02 in SGI byte order stores the offset of its last
+    record, POINT:LABELS, in Intel order: 0x013F read big-endian is 16129).
+    When nothing fits, the walk stops and keeps what was read before.  A
+    parameter whose data is complete but whose description-length byte is cut
+    off by its offset keeps its value (sample 29, below).
     """
     groups: dict[int, str] = {}
     params: list[_Param] = []
@@ -251,74 +278,95 @@ def _parse_parameters(buf: bytes, start: int, end: int, codec: _Codec, warnings:
         nlen = abs(nlen)  # negative = locked
         if pos + 4 + nlen > end:
             warnings.append(f"parameter record at byte {pos} runs past the parameter section; "
-                            f"parameters after it are ignored")
+                            f"parameters from there on are ignored")
             break
         raw_name = buf[pos + 2:pos + 2 + nlen]
-        name = raw_name.decode("latin-1").upper()
         if not all(0x21 <= c <= 0x7E for c in raw_name):  # names are printable 7-bit ASCII
             warnings.append(f"parameter record at byte {pos} has an invalid name {raw_name!r}; "
-                            f"parameters after it are ignored")
+                            f"parameters from there on are ignored")
             break
-        off = codec.i16(buf, pos + 2 + nlen)
-        body_start = pos + 4 + nlen
-        if off < 0:
-            warnings.append(f"parameter record {name} has a negative offset to the next record ({off}); "
-                            f"parameters after it are ignored")
-            break
-        # off counts from the offset field itself; 0 marks the last record (its body runs to the end)
-        nxt = pos + 2 + nlen + off if off else end
-        if off and (off < 2 or nxt > end):
-            warnings.append(f"parameter record {name} points past the parameter section; "
-                            f"parameters after it are ignored")
-            break
-        body = buf[body_start:nxt]
+        name = raw_name.decode("ascii").upper()
         what = f"group {name}" if gid < 0 else f"parameter {groups.get(gid, f'#{gid}')}:{name}"
+        off_at = pos + 2 + nlen
+        off = codec.i16(buf, off_at)
+        b0 = off_at + 2  # first byte of the record's content
+
+        # The content's own layout, independent of the offset.
+        bpe = ndim = nbytes = 0
+        dims: list[int] = []
+        if gid < 0:
+            clen = 1 + (buf[b0] if b0 < end else 0)
+        else:
+            if b0 + 2 > end:
+                warnings.append(f"{what}: record cut by the end of the parameter section; "
+                                f"parameters from there on are ignored")
+                break
+            bpe = struct.unpack_from("b", buf, b0)[0]
+            ndim = buf[b0 + 1]
+            if bpe not in (-1, 1, 2, 4) or ndim > 7 or b0 + 2 + ndim > end:
+                warnings.append(f"{what}: invalid element size {bpe} or dimension count {ndim}; "
+                                f"parameters from there on are ignored")
+                break
+            dims = list(buf[b0 + 2:b0 + 2 + ndim])
+            nbytes = abs(bpe) * (int(np.prod(dims)) if dims else 1)
+            dend = b0 + 2 + ndim + nbytes
+            clen = dend - b0 + 1 + (buf[dend] if dend < end else 0)
+
+        # Where the next record starts.
+        if off == 0:
+            nxt = end
+        else:
+            nxt = off_at + off
+            if not (off >= 2 and nxt <= end and _record_start_ok(buf, nxt, end)):
+                swapped = struct.unpack("<h" if codec.end == ">" else ">h", buf[off_at:off_at + 2])[0]
+                for how, o in (("its byte-swapped value", swapped), ("the record's own length", 2 + clen)):
+                    n = off_at + o
+                    if o >= 2 and n <= end and _record_start_ok(buf, n, end):
+                        warnings.append(f"{what}: offset to the next record ({off}) leads nowhere; "
+                                        f"{how} ({o}) does and was used")
+                        nxt = n
+                        break
+                else:
+                    warnings.append(f"{what}: offset to the next record ({off}) leads outside the parameter "
+                                    f"records; parameters from there on are ignored")
+                    if gid < 0 or b0 + 2 + ndim + nbytes > end:
+                        break
+                    nxt = -1  # keep this parameter if its data is whole, then stop
+
+        rec_end = end if nxt < 0 else nxt
         if gid < 0:
             if -gid in groups and groups[-gid] != name:
                 warnings.append(f"group id {-gid} is defined twice ({groups[-gid]}, {name}); keeping the first")
             else:
                 groups[-gid] = name
         else:
-            if len(body) < 2:
-                warnings.append(f"{what}: record too short for its type and dimensions; "
-                                f"parameters after it are ignored")
-                break
-            bpe = struct.unpack_from("b", body, 0)[0]
-            ndim = body[1]
-            if bpe not in (-1, 1, 2, 4) or ndim > 7 or 2 + ndim > len(body):
-                warnings.append(f"{what}: invalid element size {bpe} or dimension count {ndim}; "
-                                f"parameters after it are ignored")
-                break
-            dims = list(body[2:2 + ndim])
-            nbytes = abs(bpe) * (int(np.prod(dims)) if dims else 1)
-            dstart = 2 + ndim
-            if dstart + nbytes > len(body):
+            dstart = b0 + 2 + ndim
+            if dstart + nbytes > rec_end:
                 warnings.append(f"{what}: its data ({nbytes} bytes) runs past its record "
-                                f"({len(body) - dstart} bytes); parameters after it are ignored")
+                                f"({max(rec_end - dstart, 0)} bytes); parameters from there on are ignored")
                 break
-            data = body[dstart:dstart + nbytes]
-            if dstart + nbytes == len(body) and off:
+            if dstart + nbytes == rec_end and nxt != end:
                 # The description-length byte is missing: the record's offset ends
-                # exactly after the data.  This is the defect of c3d.org sample 29:
-                # POINT:LABELS (char, dims 12 x 38) has offset 462 where its content
-                # needs 463 (2 offset bytes + type + ndim + 2 dims + 456 label bytes
-                # + 1 description length); the next record (DESCRIPTIONS) starts at
-                # where the description length should be.  The labels themselves are
-                # complete, so keep them.
+                # exactly after the data.  This is the defect of c3d.org sample 29
+                # (Facial-Sing): POINT:LABELS (char, dims 12 x 38) has the offset
+                # 462 where its content needs 463 (2 offset bytes + element size +
+                # dimension count + 2 dimensions + 456 label bytes + 1 description
+                # length); the next record, POINT:DESCRIPTIONS, starts where the
+                # description length should be (it reads as 12, the length of the
+                # name "DESCRIPTIONS").  The labels themselves are complete: keep them.
                 warnings.append(f"{what}: record ends right after its data, without the description "
                                 f"length byte the format requires (its offset to the next record is "
                                 f"1 byte short); value kept, description taken as empty")
-            elif dstart + nbytes < len(body):
-                dlen = body[dstart + nbytes]
-                if dstart + nbytes + 1 + dlen > len(body):
-                    warnings.append(f"{what}: description runs past its record; truncated")
+            elif dstart + nbytes < rec_end and dstart + nbytes + 1 + buf[dstart + nbytes] > rec_end:
+                warnings.append(f"{what}: description runs past its record; ignored")
+            data = buf[dstart:dstart + nbytes]
             try:
                 value = _decode_value(bpe, dims, data, codec)
             except (ValueError, IndexError) as e:  # numbers that cannot be decoded
-                warnings.append(f"{what}: value could not be decoded ({e}); parameters after it are ignored")
+                warnings.append(f"{what}: value could not be decoded ({e}); parameters from there on are ignored")
                 break
             params.append(_Param(gid, name, bpe, dims, data, value))
-        if not off:
+        if off == 0 or nxt < 0:
             break
         pos = nxt
     return groups, params
@@ -384,7 +432,10 @@ def _parse(path: str | os.PathLike):
         if p.name in parameters.setdefault(g, {}):
             warnings.append(f"parameter {g}:{p.name} appears twice; keeping the first")
             continue
-        parameters[g][p.name] = p.value
+        value = p.value
+        if p.bpe == 2 and p.name in _UNSIGNED.get(g, ()):
+            value = value & 0xFFFF  # counts the guide reads as unsigned 16-bit (up to 65535)
+        parameters[g][p.name] = value
         raw[(g, p.name)] = p
     for g in gnames.values():
         parameters.setdefault(g, {})
@@ -483,10 +534,16 @@ def _parse(path: str | os.PathLike):
         warnings.append(f"ANALOG:USED x ANALOG:RATE/POINT:RATE ({a_used} x {a_rate:g}/{rate:g}) differs from "
                         f"the header's analog samples per frame ({h_analog}); using the header")
 
-    is_float = scale < 0
-    word = 4 if is_float else 2
     frame_words = 4 * n_points + analog_words
     dstart = (data_start - 1) * BLOCK
+    if not (math.isfinite(scale) and scale != 0):
+        # No usable scale anywhere: its sign is the format, so take the one the file is big enough for.
+        is_float = dstart + frames * frame_words * 4 <= len(buf)
+        warnings.append(f"POINT:SCALE and the header's scale are {scale}; read as "
+                        f"{'float' if is_float else 'integer'} data with scale {'-1' if is_float else '1'}")
+        scale = -1.0 if is_float else 1.0
+    is_float = scale < 0
+    word = 4 if is_float else 2
     need = frames * frame_words * word
     if dstart + need > len(buf):
         have = (len(buf) - dstart) // (frame_words * word) if frame_words else 0

@@ -32,6 +32,7 @@ class Candidates:
     x: np.ndarray          #: full-resolution centre estimates
     y: np.ndarray
     level: np.ndarray      #: pyramid level each came from
+    radius: np.ndarray     #: half-contrast radius estimate, full-resolution px
     feats: np.ndarray      #: (N, F) features
 
 
@@ -89,55 +90,117 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
         lv_all.append(np.full(len(xs), level, np.int8))
     if not f_all:
         z = np.zeros(0)
-        return Candidates(z, z, z.astype(np.int8), np.zeros((0, len(fe.FEATURE_NAMES)), np.float32)), bright
-    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), np.concatenate(lv_all),
-                      np.concatenate(f_all)), bright
+        return Candidates(z, z, z.astype(np.int8), z, np.zeros((0, len(fe.FEATURE_NAMES)), np.float32)), bright
+    F = np.concatenate(f_all)
+    lv = np.concatenate(lv_all)
+    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv,
+                      fe.profile_radius(F) * 2.0 ** lv, F), bright
 
 
-def fit_level(level: int) -> int:
-    """Pyramid level the blobs found on ``level`` are fitted on.
+#: Fit window half-sizes (pixels of the fit level); windows are grouped so each group is one batched fit.
+_WINDOWS = (6, 9, 13, 18)
+#: Largest blob radius fitted at a level's full resolution; larger blobs go one octave down.
+_MAX_FIT_RADIUS = 7.0
+
+
+def _plan(r0: np.ndarray):
+    """Fit level and window half-size for blobs of initial radius ``r0`` (full-res px).
 
     Small blobs are fitted at full resolution (their centre accuracy matters
-    most); blobs of 8 px radius and more have edges long enough that fitting two
-    octaves down loses little, and keeps every window at 29x29 pixels or less.
+    most); larger ones an octave down per doubling, which keeps every window
+    at 37x37 pixels or less while their long edges keep the centre accurate.
     """
-    return max(0, level - 2)
+    f = np.maximum(0, np.ceil(np.log2(np.maximum(r0, 1e-3) / _MAX_FIT_RADIUS))).astype(int)
+    rf = r0 / 2.0 ** f
+    need = np.ceil(2.3 * rf + 2)
+    wins = np.asarray(_WINDOWS)
+    k = np.minimum(np.searchsorted(wins, need), len(wins) - 1)
+    return f, wins[k]
 
 
-def _window(level: int) -> int:
-    """Fit window half-size (pixels of the fit level) for blobs found on ``level``: ~2.3 radii."""
-    return int(3 * 2 ** (level - fit_level(level)) + 2)
+def _fit_group(imgs, x, y, r0, f, h):
+    """One batched fit of blobs sharing fit level ``f`` and window ``h``."""
+    sc = 2.0 ** f
+    img = imgs[f]
+    pad = cv2.copyMakeBorder(img, h, h, h, h, cv2.BORDER_REPLICATE)
+    # Full-resolution pixel centre x maps to (x + 0.5) / sc - 0.5 on level f.
+    fx, fy = (x + 0.5) / sc - 0.5, (y + 0.5) / sc - 0.5
+    ix = np.clip(np.rint(fx).astype(np.int64), 0, img.shape[1] - 1)
+    iy = np.clip(np.rint(fy).astype(np.int64), 0, img.shape[0] - 1)
+    p, good = fit_ellipses(extract(pad, ix + h, iy + h, h), r0 / sc)
+    major, minor, ang = ellipse_axes(p)
+    good &= np.isfinite(major) & (major < 2 * h + 1)
+    return ((ix + p[:, 0] + 0.5) * sc - 0.5, (iy + p[:, 1] + 0.5) * sc - 0.5, major * sc, minor * sc, ang, good)
 
 
-def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, level: np.ndarray):
-    """Steps 3-4: fit ellipses; returns full-resolution (x, y, major, minor, angle, ok)."""
+def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray):
+    """Steps 3-4: fit ellipses; returns full-resolution (x, y, major, minor, angle, ok).
+
+    Blobs whose fitted size outgrows their window (the radius guess was low)
+    are fitted again with a window planned from the first fit.
+    """
     n = len(x)
     out = [np.zeros(n, np.float64) for _ in range(5)]
     ok = np.zeros(n, bool)
     if n == 0:
         return (*out, ok)
     imgs = {0: bright}
-    for f in range(1, fit_level(int(level.max())) + 1):
-        imgs[f] = cv2.pyrDown(imgs[f - 1])
-    for lv in np.unique(level):
-        sel = np.flatnonzero(level == lv)
-        f = fit_level(int(lv))
-        sc = 2.0 ** f
-        img = imgs[f]
-        h = _window(int(lv))
-        pad = cv2.copyMakeBorder(img, h, h, h, h, cv2.BORDER_REPLICATE)
-        # Full-resolution pixel centre x maps to (x + 0.5) / sc - 0.5 on level f.
-        fx, fy = (x[sel] + 0.5) / sc - 0.5, (y[sel] + 0.5) / sc - 0.5
-        ix = np.clip(np.rint(fx).astype(np.int64), 0, img.shape[1] - 1)
-        iy = np.clip(np.rint(fy).astype(np.int64), 0, img.shape[0] - 1)
-        patches = extract(pad, ix + h, iy + h, h)
-        p, good = fit_ellipses(patches, np.full(len(sel), 1.5 * 2.0 ** (lv - f)))
-        major, minor, ang = ellipse_axes(p)
-        out[0][sel] = (ix + p[:, 0] + 0.5) * sc - 0.5
-        out[1][sel] = (iy + p[:, 1] + 0.5) * sc - 0.5
-        out[2][sel], out[3][sel], out[4][sel] = major * sc, minor * sc, ang
-        ok[sel] = good & np.isfinite(major) & (major < 2 * h + 1)
+    todo = np.arange(n)
+    rr = r0.astype(np.float64)
+    hmax = np.zeros(n)
+    for _round in range(3):
+        f, h = _plan(rr[todo])
+        for key in sorted(set(zip(f.tolist(), h.tolist()))):
+            sel = todo[(f == key[0]) & (h == key[1])]
+            for lv in range(1, key[0] + 1):
+                if lv not in imgs:
+                    imgs[lv] = cv2.pyrDown(imgs[lv - 1])
+            res = _fit_group(imgs, x[sel], y[sel], rr[sel], *key)
+            for i in range(5):
+                out[i][sel] = res[i]
+            ok[sel] = res[5]
+            hmax[sel] = key[1] * 2.0 ** key[0]
+        # Refit (a) blobs too big for their window (2.2 semi-major axes must fit
+        # inside it) and (b) blobs whose centre ended far from the window centre:
+        # coarse-level candidates start up to 2 px off, and an off-centre window
+        # lets the fit settle on a lopsided optimum.
+        t = todo[ok[todo]]
+        off = np.maximum(np.abs(out[0][t] - x[t]), np.abs(out[1][t] - y[t])) * 2.0 ** -_plan(rr[t])[0]
+        again = t[(1.1 * out[2][t] > hmax[t] - 1) | (off > 0.6)]
+        if len(again) == 0:
+            break
+        rr[again] = np.maximum(0.5 * out[2][again], 1.0)
+        x, y = x.copy(), y.copy()
+        x[again], y[again] = out[0][again], out[1][again]
+        todo = again
     return (*out, ok)
+
+
+def _suppress(x, y, reach, score) -> np.ndarray:
+    """Indices of candidates kept when stronger ones within ``reach`` suppress the rest."""
+    if len(x) < 2:
+        return np.arange(len(x))
+    from scipy.spatial import cKDTree
+    pts = np.stack([x, y], 1)
+    tree = cKDTree(pts)
+    order = np.argsort(-score, kind="stable")
+    alive = np.ones(len(x), bool)
+    pairs = tree.query_pairs(float(reach.max()), output_type="ndarray")
+    if len(pairs) == 0:
+        return np.arange(len(x))
+    d = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
+    # Two distinct blobs are at least the sum of their radii apart; one blob seen on two
+    # octaves gives centres much closer than either radius.
+    pairs = pairs[d < np.minimum(reach[pairs[:, 0]], reach[pairs[:, 1]]) + 1.0]
+    nbr: dict[int, list[int]] = {}
+    for i, j in pairs.tolist():
+        nbr.setdefault(i, []).append(j)
+        nbr.setdefault(j, []).append(i)
+    for i in order.tolist():
+        if alive[i]:
+            for j in nbr.get(i, ()):
+                alive[j] = False
+    return np.flatnonzero(alive)
 
 
 def _dedupe(x, y, minor, score) -> np.ndarray:
@@ -201,8 +264,12 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
         model = default_model(bool(white))
     cand, bright = find_candidates(img, white, min_major, max_major)
     prob = model.predict(cand.feats)
-    sel = prob >= max(float(threshold), 1e-6)
-    x, y, major, minor, ang, ok = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.level[sel])
+    sel = np.flatnonzero(prob >= max(float(threshold), 1e-6))
+    # One blob is usually a candidate on two or three octaves: fit it once, from the
+    # finest octave's candidate (closest to the centre; coarse ones start pixels off).
+    sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob[sel] - cand.level[sel])]
+    x, y, major, minor, ang, ok = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel])
+    # Candidates found twice (two octaves) converge to the same fit; dedupe keeps one.
     # The fit may wander to a neighbour: it must stay near the candidate.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     lv = cand.level[sel]

@@ -154,3 +154,23 @@ def features(lvl: np.ndarray, g: np.ndarray, ys: np.ndarray, xs: np.ndarray, dog
     F[:, 12] = np.log(np.maximum(dog, 1e-3) / lnoise)
     F[:, 13] = P[:, _INNER_IDX].std(1) / contrast
     return F
+
+
+def profile_radius(F: np.ndarray) -> np.ndarray:
+    """Half-contrast radius (level px) from the radial profile features.
+
+    The profile ``(centre - ring_k) / contrast`` rises from 0 at the centre to
+    1 in the surround; the radius is where it crosses 0.5, linearly
+    interpolated between the ring radii.
+    """
+    radii = np.array([0.0, 1.5, 2.5, 3.6])
+    prof = np.concatenate([np.zeros((len(F), 1), np.float32), F[:, 1:4]], 1)
+    prof = np.maximum.accumulate(np.clip(prof, 0, None), axis=1)
+    r = np.full(len(F), 3.6)
+    done = np.zeros(len(F), bool)
+    for k in range(1, 4):
+        hit = ~done & (prof[:, k] >= 0.5)
+        t = (0.5 - prof[hit, k - 1]) / np.maximum(prof[hit, k] - prof[hit, k - 1], 1e-6)
+        r[hit] = radii[k - 1] + t * (radii[k] - radii[k - 1])
+        done |= hit
+    return np.clip(r, 0.7, 3.6)

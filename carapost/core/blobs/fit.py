@@ -2,11 +2,12 @@
 
 Each blob is modelled as a soft-edged ellipse on a flat background::
 
-    m(x, y) = b + a * sigmoid(k * (1 - q)),   q^2 = [dx dy] Q [dx dy]^T
+    m(x, y) = b + gx x + gy y + a * sigmoid(k * (1 - q)),   q^2 = [dx dy] Q [dx dy]^T
 
 with ``Q = [[A, B], [B, C]]`` (the ellipse ``q = 1`` is the half-contrast
-boundary), ``a`` the contrast, ``b`` the local background and ``k`` the edge
-sharpness (optical blur).  Levenberg-Marquardt on all 8 parameters is run on
+boundary), ``a`` the contrast, ``b + gx x + gy y`` the local background (faces are
+shaded: a flat background would pull the centre up the gradient) and ``k``
+the edge sharpness (optical blur).  Levenberg-Marquardt on all 10 parameters is run on
 every blob at once (batched 8x8 solves).  A window that follows the current
 ellipse (weight 1 inside 1.6 radii, 0 beyond 2.2) keeps neighbouring markers
 and skin structure out of the fit.
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-N_PARAMS = 8  # x0, y0, A, B, C, a, b, k
+N_PARAMS = 10  # x0, y0, A, B, C, a, b, k, gx, gy
 
 
 def extract(img: np.ndarray, ix: np.ndarray, iy: np.ndarray, h: int) -> np.ndarray:
@@ -39,7 +40,7 @@ def _model(p, X, Y):
     q = np.sqrt(np.maximum(q2, 0) + 1e-4)
     k = p[:, 7, None, None]
     s = 1.0 / (1.0 + np.exp(-np.clip(k * (1 - q), -30, 30)))
-    m = p[:, 6, None, None] + p[:, 5, None, None] * s
+    m = p[:, 6, None, None] + p[:, 8, None, None] * X + p[:, 9, None, None] * Y + p[:, 5, None, None] * s
     return m, dx, dy, q, s
 
 
@@ -47,7 +48,7 @@ def _weights(q):
     return np.clip((2.2 - q) / 0.6, 0.0, 1.0)
 
 
-def fit_ellipses(patches: np.ndarray, r0: np.ndarray, iters: int = 6) -> tuple[np.ndarray, np.ndarray]:
+def fit_ellipses(patches: np.ndarray, r0: np.ndarray, iters: int = 5) -> tuple[np.ndarray, np.ndarray]:
     """Fit the soft-ellipse model to bright blobs centred near each window's centre.
 
     Parameters
@@ -60,7 +61,7 @@ def fit_ellipses(patches: np.ndarray, r0: np.ndarray, iters: int = 6) -> tuple[n
     Returns
     -------
     params : ndarray (N, 8)
-        ``x0, y0`` relative to the window centre, ``A, B, C, a, b, k``.
+        ``x0, y0`` relative to the window centre, ``A, B, C, a, b, k, gx, gy``.
     ok : ndarray (N,) bool
         The fit converged to a plausible blob inside the window.
     """
@@ -89,29 +90,28 @@ def fit_ellipses(patches: np.ndarray, r0: np.ndarray, iters: int = 6) -> tuple[n
     res = patches - m
     cost = (W * res * res).sum((1, 2))
     eye = np.eye(N_PARAMS, dtype=np.float32)
+    J = np.empty((N, n, n, N_PARAMS), np.float32)
+    J[..., 6] = 1.0
+    J[..., 8] = X
+    J[..., 9] = Y
+    Jf = J.reshape(N, n * n, N_PARAMS)
     for _ in range(iters):
         a, k = p[:, 5, None, None], p[:, 7, None, None]
         ds = s * (1 - s)
-        dm_dq = -a * ds * k
-        inv_q = 1.0 / q
+        dm_dq = -a * ds * k / q
         A, B, C = p[:, 2, None, None], p[:, 3, None, None], p[:, 4, None, None]
-        J = np.stack([
-            dm_dq * (-(A * dx + B * dy) * inv_q),
-            dm_dq * (-(B * dx + C * dy) * inv_q),
-            dm_dq * (0.5 * dx * dx * inv_q),
-            dm_dq * (dx * dy * inv_q),
-            dm_dq * (0.5 * dy * dy * inv_q),
-            s,
-            np.ones_like(s),
-            a * ds * (1 - q),
-        ], -1).reshape(N, n * n, N_PARAMS)
-        Wf = W.reshape(N, n * n, 1)
-        JW = J * Wf
-        JWt = JW.transpose(0, 2, 1)
-        H = JWt @ J                                   # batched BLAS: far faster than einsum
+        J[..., 0] = -dm_dq * (A * dx + B * dy)
+        J[..., 1] = -dm_dq * (B * dx + C * dy)
+        J[..., 2] = 0.5 * dm_dq * dx * dx
+        J[..., 3] = dm_dq * dx * dy
+        J[..., 4] = 0.5 * dm_dq * dy * dy
+        J[..., 5] = s
+        J[..., 7] = a * ds * (1 - q)
+        JWt = (Jf * W.reshape(N, n * n, 1)).transpose(0, 2, 1)
+        H = JWt @ Jf                                   # batched BLAS: far faster than einsum
         grad = (JWt @ res.reshape(N, n * n, 1))[:, :, 0]
         D = np.diagonal(H, axis1=1, axis2=2)
-        Hd = H + (lam[:, None] * D)[:, :, None] * eye + 1e-9 * eye
+        Hd = H + (lam[:, None] * D + 1e-9)[:, :, None] * eye
         try:
             step = np.linalg.solve(Hd, grad[:, :, None])[:, :, 0]
         except np.linalg.LinAlgError:

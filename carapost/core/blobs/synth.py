@@ -198,20 +198,20 @@ def render(rng, h=360, w=480, markers=40, white=False, radius=(2.0, 7.0), aspect
     axes = np.array(axes, float).reshape(-1, 2)
     hidden = np.zeros((0, 2))
     if occluders and len(centres) and rng.random() < 0.5:
-        # A brim edge across the image: markers it covers by more than 40 % are "hidden".
+        # A dark band (the brim) across the image: markers it touches are partly or
+        # wholly hidden, so they are neither required nor counted as false.
         ang = rng.uniform(0, np.pi)
         px, py = rng.uniform(0, w), rng.uniform(0, h)
+        wd = rng.uniform(20, 80)
         yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
         d = (xx - px) * np.sin(ang) - (yy - py) * np.cos(ang)
-        m = cv2.GaussianBlur(np.clip(0.5 - d, 0, 1).astype(np.float32), (0, 0), 0.8)
+        m = np.clip(np.minimum(0.5 + d, 0.5 + wd - d), 0, 1).astype(np.float32)
+        m = cv2.GaussianBlur(m, (0, 0), 0.8)
         img[:] = img * (1 - m) + m * rng.uniform(5, 40)
         dc = (centres[:, 0] - px) * np.sin(ang) - (centres[:, 1] - py) * np.cos(ang)
-        gone = dc < 0.2 * axes[:, 0]
-        hidden = centres[gone & (dc > -axes[:, 0] - 2)]
-        keep = dc > axes[:, 0] + 1.5   # fully visible; partial ones are neither required nor false
-        part = ~keep & ~gone
-        hidden = np.vstack([hidden, centres[part]])
-        centres, axes = centres[keep], axes[keep]
+        touched = (dc > -axes[:, 0] - 1.5) & (dc < wd + axes[:, 0] + 1.5)
+        hidden = centres[touched]
+        centres, axes = centres[~touched], axes[~touched]
     img = cv2.GaussianBlur(img, (0, 0), rng.uniform(*blur))
     sig = rng.uniform(*noise)
     img = img + rng.normal(0, 1, img.shape).astype(np.float32) * sig

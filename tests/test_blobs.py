@@ -1,0 +1,273 @@
+"""Blob detection: the detector's filters and inputs, and the undoable blob operations."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from carapost.core.blob_ops import (blob_preview, detect_blobs_current_frame, detect_blobs_range,
+                                    read_blob_parameters_from_pico, remove_unused_detections)
+from carapost.core.blobs import detect
+from carapost.core.blobs.synth import disc_image, render
+from carapost.core.commands import UndoStack
+from carapost.core.detections import COLOR_BLACK, COLOR_WHITE, make_detections
+from carapost.core.errors import CaraError
+from carapost.core.points import SRC_DETECTION, SRC_NONE
+from carapost.core.progress import Cancelled, Progress
+from carapost.core.project import Project
+from carapost.core.properties import Properties
+
+
+def _discs(radii, white=False, size=(240, 320), bg=120, seed=0):
+    """Isolated discs of the given radii on flat grey with a little noise, and their centres."""
+    rng = np.random.default_rng(seed)
+    img = np.full(size, float(bg), np.float32)
+    centres = []
+    for i, r in enumerate(radii):
+        cx, cy = 40 + (i % 5) * 60 + rng.uniform(-0.5, 0.5), 40 + (i // 5) * 60 + rng.uniform(-0.5, 0.5)
+        disc, _ = disc_image(rng, 41, r, 1.0, 90.0, 0.0, 0.0, centre=(20 + cx % 1, 20 + cy % 1))
+        x0, y0 = int(cx) - 20, int(cy) - 20
+        img[y0:y0 + 41, x0:x0 + 41] += disc if white else -disc
+        centres.append((cx, cy))
+    img += rng.normal(0, 1.5, img.shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8), np.array(centres)
+
+
+def _match(rec, centres, tol=1.5):
+    if len(rec) == 0:
+        return 0
+    d = np.hypot(rec["x"][None, :] - centres[:, 0:1], rec["y"][None, :] - centres[:, 1:2])
+    return int((d.min(1) <= tol).sum())
+
+
+# ------------------------------------------------------------------ detector
+def test_finds_black_markers_on_a_face_like_image():
+    s = render(np.random.default_rng(3), 360, 480, markers=30, radius=(2.5, 6), noise=(1, 2), confusers=4)
+    rec = detect(s.image)
+    assert _match(rec, s.centres) >= 0.95 * len(s.centres)
+    assert np.all(rec["color"] == COLOR_BLACK)
+    d = np.hypot(rec["x"][None, :] - s.centres[:, 0:1], rec["y"][None, :] - s.centres[:, 1:2]).min(1)
+    assert np.median(d) < 0.15
+
+
+def test_centre_accuracy_isolated_disc():
+    img, centres = _discs([4.0] * 5)
+    rec = detect(img)
+    assert len(rec) == 5
+    d = np.hypot(rec["x"][None, :] - centres[:, 0:1], rec["y"][None, :] - centres[:, 1:2]).min(1)
+    assert d.max() < 0.1
+    assert np.allclose(rec["major"], 8.0, atol=0.8) and np.allclose(rec["minor"], 8.0, atol=0.8)
+
+
+def test_radius_filters_use_the_longest_axis_full_length():
+    img, centres = _discs([2.5, 2.5, 2.5, 8.0, 8.0, 8.0])
+    small, big = centres[:3], centres[3:]
+    rec = detect(img, min_major=4.0, max_major=50.0)
+    assert _match(rec, small) == 3 and _match(rec, big) == 3
+    rec = detect(img, min_major=10.0, max_major=50.0)          # majors ~5 px are dropped
+    assert _match(rec, small) == 0 and _match(rec, big) == 3
+    rec = detect(img, min_major=4.0, max_major=10.0)           # majors ~16 px are dropped
+    assert _match(rec, small) == 3 and _match(rec, big) == 0
+
+
+def test_threshold_finds_fewer_as_it_rises():
+    s = render(np.random.default_rng(4), 360, 480, markers=25, confusers=10)
+    n = [len(detect(s.image, threshold=t)) for t in (0.05, 0.4, 0.95)]
+    assert n[0] >= n[1] >= n[2]
+    assert n[0] > n[2]
+
+
+def test_black_white_switching():
+    img, centres = _discs([4.0] * 4, white=True)
+    assert _match(detect(img, white=True), centres) == 4
+    assert _match(detect(img, white=False), centres) == 0
+    props = Properties()
+    assert _match(blob_preview(img, props), centres) == 0          # default: black only
+    props.set("blob.find_white_blobs", True)
+    rec = blob_preview(img, props)
+    assert _match(rec, centres) == 4 and np.all(rec["color"][_near(rec, centres)] == COLOR_WHITE)
+    props.set("blob.find_black_blobs", False)
+    props.set("blob.find_white_blobs", False)
+    assert len(blob_preview(img, props)) == 0
+
+
+def _near(rec, centres):
+    d = np.hypot(rec["x"][:, None] - centres[None, :, 0], rec["y"][:, None] - centres[None, :, 1])
+    return d.min(1) <= 1.5
+
+
+@pytest.mark.parametrize("value", [0, 128, 255])
+def test_constant_and_saturated_images_give_nothing(value):
+    img = np.full((200, 300), value, np.uint8)
+    assert len(detect(img)) == 0 and len(detect(img, white=True)) == 0
+
+
+def test_saturated_region_gives_no_blobs_inside():
+    img, centres = _discs([4.0] * 10, white=True)
+    img[:, :160] = 255                                        # left half burnt out
+    rec = detect(img, white=True)
+    assert np.all(rec["x"] >= 150)
+
+
+def test_empty_and_bad_images_are_refused_clearly():
+    with pytest.raises(CaraError, match="too small"):
+        detect(np.zeros((0, 0), np.uint8))
+    with pytest.raises(CaraError, match="float32"):
+        detect(np.zeros((50, 50), np.float32))
+    with pytest.raises(CaraError, match="shape"):
+        detect(np.zeros((5, 50, 50), np.uint8))
+
+
+def test_16bit_and_colour_images_are_converted():
+    img, centres = _discs([4.0] * 4)
+    ref = detect(img)
+    r16 = detect(img.astype(np.uint16) * 257)
+    rgb = detect(cv2.cvtColor(img, cv2.COLOR_GRAY2BGR))
+    assert len(r16) == len(ref) == len(rgb)
+    assert np.allclose(r16["x"], ref["x"]) and np.allclose(rgb["y"], ref["y"])
+
+
+# -------------------------------------------------------------- operations
+@pytest.fixture
+def take(tmp_path):
+    """A 2-sensor, 4-frame take of image folders with black markers."""
+    from carapost.io.take import project_from_sources
+
+    rng = np.random.default_rng(7)
+    dirs = []
+    for s in range(2):
+        d = tmp_path / f"cam{s}"
+        d.mkdir()
+        for f in range(4):
+            img, _c = _discs([4.0] * 6, seed=10 * s + f)
+            cv2.imwrite(str(d / f"{f:04d}.png"), img)
+        dirs.append(str(d))
+    del rng
+    return project_from_sources(dirs)
+
+
+def test_detect_current_frame_and_undo(take):
+    before = take.digest()
+    stack = UndoStack(take)
+    cmd = detect_blobs_current_frame(take, 1)
+    assert take.digest() == before                            # computed, not applied
+    stack.push(cmd)
+    assert take.detections[0].count(1) == 6 and take.detections[1].count(1) == 6
+    assert take.detections[0].detected[1] and not take.detections[0].detected[0]
+    stack.undo()
+    assert take.digest() == before
+    stack.redo()
+    assert take.detections[1].count(1) == 6
+
+
+def test_detect_range_honours_channel_selection_and_undo(take):
+    take.channel_selection = [1]
+    before = take.digest()
+    stack = UndoStack(take)
+    stack.push(detect_blobs_range(take, 0, 3, workers=2))
+    assert [take.detections[1].count(f) for f in range(4)] == [6] * 4
+    assert take.detections[0].total() == 0
+    stack.undo()
+    assert take.digest() == before
+
+
+def test_detect_range_cancel_leaves_project_untouched(take):
+    before = take.digest()
+    prog = Progress()
+    prog._callback = lambda done, total, msg: prog.cancel() if done >= 1 else None
+    with pytest.raises(Cancelled):
+        detect_blobs_range(take, 0, 3, progress=prog, workers=1)
+    assert take.digest() == before
+    prog = Progress()
+    prog._callback = lambda done, total, msg: prog.cancel() if done >= 2 else None
+    with pytest.raises(Cancelled):
+        detect_blobs_range(take, 0, 3, progress=prog, workers=2)
+    assert take.digest() == before
+
+
+def test_redetect_keeps_attachments_within_1px(take):
+    stack = UndoStack(take)
+    stack.push(detect_blobs_current_frame(take, 2, sensors=[0]))
+    rec = take.detections[0].frame(2)
+    pt = take.new_point()
+    pt.src[2, 0], pt.det[2, 0], pt.uv[2, 0] = SRC_DETECTION, 3, (rec[3]["x"], rec[3]["y"])
+    far = take.new_point(point_id=pt.id + 1)
+    far.src[2, 0], far.det[2, 0] = SRC_DETECTION, 4
+    from carapost.core.edits import AddPoints
+    stack.push(AddPoints([pt, far]))
+    # A new set where detection 3 moved 0.3 px and detection 4 moved 5 px, order shuffled.
+    new = rec.copy()[::-1]
+    new["x"][-4] += 0.3
+    new["x"][-5] += 5.0
+    before = take.digest()
+    from carapost.core.blob_ops import DetectBlobs
+    stack.push(DetectBlobs({(0, 2): new}))
+    p, q = take.points[pt.id], take.points[far.id]
+    assert p.src[2, 0] == SRC_DETECTION and p.det[2, 0] == len(new) - 4
+    assert p.uv[2, 0, 0] == pytest.approx(float(new["x"][len(new) - 4]))
+    assert q.src[2, 0] == SRC_NONE and q.det[2, 0] == -1
+    stack.undo()
+    assert take.digest() == before
+
+
+def test_remove_unused_detections_remaps_and_undoes():
+    prj = Project(5, 2)
+    prj.detections[0].set_frame(1, make_detections(np.arange(5.0), np.zeros(5)))
+    prj.detections[0].set_frame(2, make_detections(np.arange(3.0), np.ones(3)))
+    prj.detections[1].set_frame(1, make_detections(np.arange(4.0), np.zeros(4)))
+    p = prj.new_point()
+    p.src[1, 0], p.det[1, 0] = SRC_DETECTION, 3
+    p.src[1, 1], p.det[1, 1] = SRC_DETECTION, 0
+    prj.add_point(p)
+    q = prj.new_point()
+    q.src[1, 0], q.det[1, 0] = SRC_DETECTION, 1
+    prj.add_point(q)
+    before = prj.digest()
+    stack = UndoStack(prj)
+    cmd = remove_unused_detections(prj)
+    stack.push(cmd)
+    assert prj.detections[0].count(1) == 2 and prj.detections[0].count(2) == 0 and prj.detections[1].count(1) == 1
+    assert p.det[1, 0] == 1 and q.det[1, 0] == 0 and p.det[1, 1] == 0
+    assert prj.detections[0].frame(1)[p.det[1, 0]]["x"] == 3.0
+    assert len(cmd._old_cells) == 3                           # only the frames that change are stored
+    stack.undo()
+    assert prj.digest() == before
+    stack.redo()
+    assert p.det[1, 0] == 1
+
+
+def test_read_blob_parameters_from_pico_and_undo():
+    prj = Project(3, 1)
+    prj.properties.set("blob.black_threshold", 0.9)
+    prj.properties.set("blob.find_white_blobs", True)
+    stack = UndoStack(prj)
+    before = prj.digest()
+    stack.push(read_blob_parameters_from_pico(prj))           # no pico parameters: defaults
+    assert prj.properties["blob.black_threshold"] == 0.4 and prj.properties["blob.find_white_blobs"] is False
+    stack.undo()
+    assert prj.digest() == before
+    prj.pico_blob_parameters = {"blob.white_threshold": "0.7", "blob.find_white_blobs": "true"}
+    stack.push(read_blob_parameters_from_pico(prj))
+    assert prj.properties["blob.white_threshold"] == 0.7 and prj.properties["blob.find_white_blobs"] is True
+
+
+def test_cli_detect_blobs_and_csv(take, tmp_path):
+    from carapost.blob_cli import add_blob_commands
+    import argparse
+
+    ap = argparse.ArgumentParser()
+    add_blob_commands(ap.add_subparsers())
+    srcs = [take.sensors[0].media.path, take.sensors[1].media.path]
+    out = tmp_path / "t.cara"
+    args = ap.parse_args(["detect-blobs", "--sources", *srcs, "-o", str(out), "--end", "1",
+                          "--set", "blob.black_threshold=0.3"])
+    assert args.func(args) == 0
+    csv_path = tmp_path / "d.csv"
+    args = ap.parse_args(["detections", str(out), "-o", str(csv_path)])
+    assert args.func(args) == 0
+    lines = csv_path.read_text().splitlines()
+    assert lines[0] == "frame,sensor,x,y,major,minor,angle,color,score"
+    assert len(lines) == 1 + 2 * 2 * 6
+    args = ap.parse_args(["detect-blobs", "--sources", *srcs, "--set", "blob.nope=1"])
+    with pytest.raises(CaraError):
+        args.func(args)
