@@ -36,3 +36,24 @@ class Brim:
     @classmethod
     def from_json(cls, d: dict) -> "Brim":
         return cls(d["name"], np.asarray(d["markers"], float).reshape(-1, 3), d.get("svg", ""))
+
+
+DEFAULT_BRIMS = ("v2.0", "v1.1", "v1.0")
+
+
+def default_brim(version: str) -> Brim:
+    """Process > Initialize Default Calibration Brim [version]: the project's own layouts.
+
+    Vicon's geometry is not public; ``resources/brims/<version>.json`` holds ours
+    (``tools/make_default_brims.py``, ``docs/brims.md``).
+    """
+    import json
+
+    from ..resources import resource_path
+
+    if version not in DEFAULT_BRIMS:
+        from .errors import CaraError
+
+        raise CaraError(f"unknown default brim {version!r} (choose {', '.join(DEFAULT_BRIMS)})")
+    d = json.loads(resource_path("brims", f"{version}.json").read_text())
+    return Brim(version, np.asarray(d["markers"], float))
