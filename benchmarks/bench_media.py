@@ -93,11 +93,12 @@ def long_take(frames: int, path: Path | None = None, log=print) -> Path:
     return path
 
 
-def _rss_mb() -> float:
+def _rss_mb(kind: str = "RssAnon") -> float:
+    """Resident memory in MB: ``RssAnon`` (heap: frames, decoders) or ``VmRSS`` (also mapped file pages)."""
     try:
         with open("/proc/self/status") as f:
             for line in f:
-                if line.startswith("VmRSS:"):
+                if line.startswith(kind + ":"):
                     return int(line.split()[1]) / 1024
     except OSError:
         pass
@@ -154,30 +155,40 @@ def run(quick: bool = False, log=None) -> list[dict]:
         for _ in sources[c].read_range(start, start + per):
             counts[c] += 1
 
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     threads = [threading.Thread(target=work, args=(c,)) for c in range(channels)]
     for th in threads:
         th.start()
     for th in threads:
         th.join()
-    dt = time.perf_counter() - t
+    dt, cpu = time.perf_counter() - t, time.process_time() - cpu
     fps = sum(counts) / dt
+    cpu_ms = cpu / sum(counts) * 1000
     results.append(_result("media.sequential_decode_4_channels", fps, "frames/s", ">= 240", fps >= 240,
-                           detail=f"{tag}; {per} frames per channel, {channels} threads, {os.cpu_count()} CPUs"))
+                           cpu_ms_per_frame=round(cpu_ms, 2), cpu_utilisation=round(cpu / dt, 2),
+                           bytes_per_frame=int(path.stat().st_size / frames),
+                           detail=f"{tag}; {per} frames per channel, {channels} threads, {os.cpu_count()} CPUs; "
+                                  f"CPU-bound: at most {os.cpu_count()} x 1000 / cpu_ms_per_frame frames/s"))
 
     # Random access: any frame (decode from its I-frame).
     rng = np.random.default_rng(1)
     src = sources[0]
-    lat = []
+    lat, dist = [], []
+    cpu = time.process_time()
     for k in rng.integers(0, frames, 20 if quick else 100):
         src.reader._decoder = None             # no help from a live decoder: a true seek
         t = time.perf_counter()
         src.read(int(k))
         lat.append((time.perf_counter() - t) * 1000)
+        dist.append(int(k) - src.gop_start(int(k)) + 1)
+    cpu = time.process_time() - cpu
     lat = np.asarray(lat)
     results.append(_result("media.random_access", lat.mean(), "ms", "< 40", np.percentile(lat, 95) < 40,
                            p95_ms=round(float(np.percentile(lat, 95)), 2), max_ms=round(float(lat.max()), 2),
-                           detail=f"{tag}; mean of {len(lat)} random frames; pass = p95 under target"))
+                           cpu_ms_mean=round(cpu * 1000 / len(lat), 2),
+                           frames_decoded_mean=round(float(np.mean(dist)), 1),
+                           detail=f"{tag}; mean of {len(lat)} random frames, each decoded from its I-frame "
+                                  f"(GOP {GOP}); pass = p95 under target"))
 
     # Stepping back one frame once its GOP is cached.
     cache = FrameCache(max_mb=256)
@@ -193,8 +204,8 @@ def run(quick: bool = False, log=None) -> list[dict]:
 
     # Memory bounded by the cache: play 4 channels through a 256 MB cache.
     cache.clear()
-    rss0 = _rss_mb()
-    peak_cache = 0
+    rss0, anon0 = _rss_mb("VmRSS"), _rss_mb()
+    peak_cache = peak_anon = 0
     play = 240 if quick else 1500
     t = time.perf_counter()
     futs = []
@@ -203,20 +214,24 @@ def run(quick: bool = False, log=None) -> list[dict]:
         futs.append(cache.prefetch(s, range(start, start + play)))
     while not all(f.done() for f in futs):
         peak_cache = max(peak_cache, cache.stats()["bytes"])
+        peak_anon = max(peak_anon, _rss_mb() - anon0)
         time.sleep(0.01)
     for f in futs:
         f.result()
     dt = time.perf_counter() - t
     st = cache.stats()
     peak_cache = max(peak_cache, st["bytes"])
-    rss_growth = _rss_mb() - rss0
+    rss_growth = _rss_mb("VmRSS") - rss0
     frame_mb = WIDTH * HEIGHT / 2 ** 20
-    ok = peak_cache <= cache.max_bytes and rss_growth < 256 + 64
+    # The bound is on the cache; the process also holds four decoders' picture pools, hence the margin.
+    ok = peak_cache <= cache.max_bytes and peak_anon < 256 + 128
     results.append(_result("media.cache_memory_bound", peak_cache / 2 ** 20, "MB", "<= 256", ok,
-                           rss_growth_mb=round(rss_growth, 1), frames_played=channels * play,
+                           peak_heap_growth_mb=round(peak_anon, 1), rss_growth_mb=round(rss_growth, 1),
+                           frames_played=channels * play,
                            cache_fill_fps=round(channels * play / dt, 1), evictions=st["evictions"],
                            detail=f"{channels} channels x {play} frames ({channels * play * frame_mb:.0f} MB "
-                                  f"decoded) through FrameCache(max_mb=256) with 2 prefetch workers"))
+                                  f"decoded) through FrameCache(max_mb=256) with 2 prefetch workers; pass = "
+                                  "cache bytes within the bound and heap (RssAnon) growth < bound + 128 MB"))
     cache.close()
     for s in sources:
         s.close()

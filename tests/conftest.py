@@ -1,66 +1,14 @@
-"""Shared fixtures: synthetic projects and the real files of ../shared/data."""
-from __future__ import annotations
-
+"""Shared fixtures (helpers live in support.py)."""
 import os
+import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
-
-
-def shared_file(*parts: str) -> Path:
-    """A file of ../shared/data, or skip the test when that folder is absent (a clone elsewhere)."""
-    p = SHARED_DATA.joinpath(*parts)
-    if not p.exists():
-        pytest.skip(f"{p} is absent: ../shared is not beside this clone")
-    return p
-
-
-def make_project(frames: int = 50, sensors: int = 4, points: int = 6, seed: int = 0, with_rig: bool = False):
-    """A small project with detections on every frame and partly tracked points."""
-    from carapost.core.detections import make_detections
-    from carapost.core.points import SRC_DETECTION, ST_RECONSTRUCTED
-    from carapost.core.project import Project
-
-    rng = np.random.default_rng(seed)
-    p = Project(frames, sensors, 60.0, name="unit")
-    for s in range(sensors):
-        for f in range(0, frames, 3):
-            n = int(rng.integers(0, 12))
-            p.detections[s].set_frame(f, make_detections(rng.uniform(0, 1280, n), rng.uniform(0, 720, n),
-                                                         rng.uniform(6, 12, n), rng.uniform(4, 6, n),
-                                                         rng.uniform(-90, 90, n), rng.uniform(0.4, 1, n)))
-    for i in range(points):
-        pt = p.new_point(label=f"M{i}" if i % 2 == 0 else "")
-        a, b = sorted(rng.integers(0, frames, 2))
-        pt.pos[a:b + 1] = rng.normal(0, 30, (b + 1 - a, 3))
-        pt.status[a:b + 1] = ST_RECONSTRUCTED
-        pt.residual[a:b + 1] = rng.uniform(0, 0.5, b + 1 - a)
-        pt.src[a:b + 1, :2] = SRC_DETECTION
-        pt.det[a:b + 1, :2] = 0
-        pt.uv[a:b + 1, :2] = rng.uniform(0, 700, (b + 1 - a, 2, 2))
-        pt.score[a:b + 1, :2] = 1.0
-        p.add_point(pt)
-    p.labels = [f"M{i}" for i in range(0, points, 2)] + ["Spare"]
-    if with_rig:
-        from carapost.core.camera import Camera
-        from carapost.core.rig import CameraRig
-
-        cams = []
-        for s in range(sensors):
-            ang = np.deg2rad(-30 + 20 * s)
-            R = np.array([[np.cos(ang), 0, -np.sin(ang)], [0, 1, 0], [np.sin(ang), 0, np.cos(ang)]])
-            centre = -R.T @ np.array([0, 0, 300.0])
-            cams.append(Camera(name=f"cam{s}", sensor_size=(1280, 720), focal_length=1400.0,
-                               principal_point=np.array([640.0, 360.0]), distortion_model="VICON_RADIAL",
-                               distortion=np.array([1e-8, 1e-15]), rotation=R, position=centre))
-        p.rig = CameraRig(cams, frames)
-    return p
+from support import make_project  # noqa: E402
 
 
 @pytest.fixture

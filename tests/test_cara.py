@@ -12,7 +12,7 @@ from carapost.core.edits import ClearPointRange, RenamePoint
 from carapost.core.errors import CaraError
 from carapost.core.project import MediaRef, Stick
 from carapost.io import cara
-from conftest import REPO, make_project
+from support import REPO, make_project
 
 
 def _full_project():

@@ -8,7 +8,7 @@ import pytest
 from carapost.cli import main
 from carapost.core.properties import PROPERTY_TABLE
 from carapost.io import cara
-from conftest import REPO, make_project, shared_file
+from support import REPO, make_project, shared_file
 
 
 def run_cli(*args):

@@ -10,7 +10,7 @@ from carapost.core.detections import make_detections
 from carapost.core.document import Document
 from carapost.core.errors import CaraError
 from carapost.core.points import SRC_DETECTION, SRC_KEYFRAME, SRC_NONE, ST_INTERPOLATED, ST_NONE, ST_RECONSTRUCTED
-from conftest import make_project
+from support import make_project
 
 TRUE_X = np.array([[5.0, -8.0, 10.0], [-20.0, 12.0, -5.0], [30.0, 25.0, 0.0]])
 

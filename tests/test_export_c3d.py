@@ -4,7 +4,7 @@ import numpy as np
 
 from carapost.core.points import BRIM, SRC_DETECTION, SRC_NONE, ST_INTERPOLATED, ST_RECONSTRUCTED, ST_SINGLE
 from carapost.io.export_c3d import export_c3d
-from conftest import make_project
+from support import make_project
 
 
 def _read(path):

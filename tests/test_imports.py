@@ -9,7 +9,7 @@ from carapost.core.errors import CaraError
 from carapost.io import cara
 from carapost.io.imports import import_xcp
 from carapost.io.xcp import write_xcp, xcp_from_cameras
-from conftest import make_project, shared_file
+from support import make_project, shared_file
 
 
 def test_import_moving_cameras(tmp_path):

@@ -5,7 +5,7 @@ from carapost.core.errors import CaraError
 from carapost.core.labels import merge_labels, parse_label_text, read_label_file
 from carapost.io import cara
 from carapost.io.imports import import_labels_from_cara, import_labels_from_text
-from conftest import make_project
+from support import make_project
 
 
 def test_parse_several_per_line_and_blank_lines():

@@ -4,7 +4,7 @@ import subprocess
 import sys
 
 import carapost
-from conftest import REPO
+from support import REPO
 
 
 def test_headless_packages_do_not_import_qt():

@@ -11,7 +11,7 @@ from carapost.core.edits import (AddPoints, ClearPointRange, DeletePoints, Renam
 from carapost.core.errors import CaraError
 from carapost.core.points import SRC_PATCH, ST_INTERPOLATED
 from carapost.core.project import Stick
-from conftest import make_project
+from support import make_project
 
 
 def _random_command(rng, project):

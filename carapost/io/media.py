@@ -225,6 +225,8 @@ class VideoSource(FrameSource):
         for pkt in self._container.demux(s):
             if pkt.size == 0 and pkt.pts is None and pkt.dts is None:
                 continue                     # the demuxer's end-of-stream packet
+            if pkt.is_discard:
+                continue                     # cut by an edit list: the decoder drops its picture
             t = pkt.pts if pkt.pts is not None else pkt.dts
             any_pts |= t is not None
             ts.append(t)

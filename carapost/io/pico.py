@@ -258,12 +258,12 @@ def ts_to_es(data: bytes | memoryview, pid: int | None = None) -> tuple[bytes, i
     return pes[9 + hlen:end].tobytes(), pts
 
 
-def _first_pts(mm, off: int, size: int) -> int | None:
-    """PTS of a frame record from its first TS packets only (cheap; for display order of B-frames)."""
-    n = min(size // TS_PACKET_SIZE, 4)
+def _first_pts(data: bytes) -> int | None:
+    """PTS of a frame from its first TS packets only (cheap; for the display order of B-frames)."""
+    n = len(data) // TS_PACKET_SIZE
     if n <= 0:
         return None
-    pk = np.frombuffer(mm, np.uint8, n * TS_PACKET_SIZE, off).reshape(n, TS_PACKET_SIZE)
+    pk = np.frombuffer(data, np.uint8, n * TS_PACKET_SIZE).reshape(n, TS_PACKET_SIZE)
     for row in pk:
         if row[0] != TS_SYNC or not row[1] & 0x40:
             continue
@@ -444,9 +444,19 @@ class PicoReader:
         self._bitrate = 0
         self._clock = (0, 0)
         pos, end = self._first, self._end
-        unpack, mm = _FRAME_HEAD.unpack_from, self._mm
+        mm = self._mm
+        unpack = _FRAME_HEAD.unpack
+        fd = self._file.fileno()
+        if hasattr(os, "pread"):
+            # One small read per frame header: cheaper than touching (page-faulting) a new page of the
+            # memory map for every frame.
+            def head_at(off, n=_FRAME_HEAD.size):
+                return unpack(os.pread(fd, n, off))
+        else:                                   # Windows
+            def head_at(off, f=_FRAME_HEAD.unpack_from):
+                return f(mm, off)
         while pos + FRAME_HEADER_SIZE <= end:
-            h = unpack(mm, pos)
+            h = head_at(pos)
             # Fast path: the checks of _plausible inline (this loop runs once per frame of the take).
             ok = (h[0] == FRAME_MAGIC and h[21] == 4 and h[20] > 0 and h[22] == h[20] - 184
                   and h[19] in _TYPE_NAMES and (h[16], h[17]) == (self._w, self._h))
@@ -512,7 +522,8 @@ class PicoReader:
             pts = np.empty(n, np.float64)
             prev = 0.0
             for r in range(n):
-                p = _first_pts(self._mm, int(self._rec_off[r]) + FRAME_HEADER_SIZE, int(self._rec_size[r])) \
+                p = _first_pts(self._read_at(int(self._rec_off[r]) + FRAME_HEADER_SIZE,
+                                             min(int(self._rec_size[r]), 4 * TS_PACKET_SIZE))) \
                     if self._rec_off[r] >= 0 else None
                 if p is not None:
                     while p + (1 << 32) < prev:        # 33-bit wrap-around
@@ -591,6 +602,12 @@ class PicoReader:
         self._warn(f"frame {idx} (number {int(self._rec_num[rec])}): {why}{following}")
         self._refresh_keyframes()
 
+    def _read_at(self, off: int, size: int) -> bytes:
+        if hasattr(os, "pread"):
+            # A read, not a slice of the map: the file's pages then do not count as this process's memory.
+            return os.pread(self._file.fileno(), size, off)
+        return self._mm[off:off + size]
+
     def _record_packet(self, rec: int) -> bytes:
         """Annex-B bytes of record ``rec``; marks it damaged and raises CaraError when it is."""
         if rec in self._damage:
@@ -598,7 +615,7 @@ class PicoReader:
         off, size = int(self._rec_off[rec]), int(self._rec_size[rec])
         start = off + FRAME_HEADER_SIZE
         try:
-            es, _ = ts_to_es(self._mm[start:start + size])
+            es, _ = ts_to_es(self._read_at(start, size))
         except _StreamError as e:
             self._mark_damaged(rec, str(e))
             raise CaraError(f"frame {self._disp(rec)} is damaged: {e}", self.path) from None
@@ -725,8 +742,9 @@ class PicoReader:
             got = self._decode_from(index)
             if got and got[0][0] == index:
                 return got[0][1]
-            why = self._damage.get(rec, "the decoder gave no picture for it")
-            raise CaraError(f"frame {index} cannot be decoded: {why}", self.path)
+            if rec in self._damage:
+                raise CaraError(f"frame {index} is damaged: {self._damage[rec]}", self.path)
+            raise CaraError(f"frame {index} cannot be decoded: the decoder gave no picture for it", self.path)
 
     def read_range(self, start: int, stop: int) -> Iterator[tuple[int, np.ndarray]]:
         """Decode frames ``start .. stop-1`` sequentially (one seek).
@@ -837,7 +855,7 @@ class PicoWriter:
     capture_name : str, optional
         ``this_capture.capture_name``; defaults to the take name of ``path``.
     timecode : str, optional
-        Start timecode ``HH:MM:SS:FF`` (metadata ``this_capture.start_timecode``).
+        Start timecode ``HH:MM:SS:FF`` (metadata ``this_capture.timecode``).
     """
 
     def __init__(self, path, width: int, height: int, *, frame_rate: float = 60.0,
@@ -865,7 +883,7 @@ class PicoWriter:
             "carapost.writer": "carapost",
         }
         if timecode is not None:
-            md["this_capture.start_timecode"] = timecode
+            md["this_capture.timecode"] = timecode
         md.update({str(k): str(v) for k, v in (metadata or {}).items()})
         self.metadata = md
         blob = bytearray(_U32.pack(len(md)))
@@ -1070,7 +1088,7 @@ def write_pico(path, frames: Iterable[np.ndarray], *, frame_rate: float = 60.0,
     capture_name : str, optional
         Defaults to the take name of ``path``.
     timecode : str, optional
-        Start timecode, stored as ``this_capture.start_timecode``.
+        Start timecode, stored as ``this_capture.timecode``.
     preset : str
         x264 speed preset.
 

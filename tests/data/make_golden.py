@@ -9,7 +9,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from test_cara import _full_project  # noqa: E402
+from test_cara import _full_project  # noqa: E402  (tests/ is on sys.path)
 
 from carapost.io import cara  # noqa: E402
 
