@@ -67,7 +67,7 @@ def face_frames(n: int, width: int = WIDTH, height: int = HEIGHT, seed: int = 0)
 
 def long_take(frames: int, path: Path | None = None, log=print) -> Path:
     """A cached 1280x720 ``.pico`` of ``frames`` frames (generated once, reused)."""
-    path = path or CACHE_DIR / f"bench_face_{WIDTH}x{HEIGHT}_{frames}_v{FORMAT_VERSION}_0.pico"
+    path = path or CACHE_DIR / f"bench_face_{WIDTH}x{HEIGHT}_{frames}_v{FORMAT_VERSION}_fastdecode_0.pico"
     if path.exists():
         try:
             with PicoReader(path) as r:
