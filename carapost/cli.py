@@ -71,6 +71,22 @@ def _print_tree(d, indent: int = 0) -> None:
             print(f"{pad}{k}: {v}")
 
 
+def _cmd_export(args) -> int:
+    from .io.cara import load_project
+
+    project = load_project(args.project)
+    if args.format == "c3d":
+        from .io.export_c3d import export_c3d
+
+        export_c3d(project, args.out)
+    elif args.format == "xcp":
+        from .io.export_xcp import export_xcp
+
+        export_xcp(project, args.out, project.active_range[0] if args.frame is None else args.frame)
+    print(f"wrote {args.out}")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from .bench import run_benchmarks
 
@@ -92,6 +108,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("export", help="the File menu's exports")
+    p.add_argument("format", choices=["c3d", "xcp"])
+    p.add_argument("project", help="a .cara project")
+    p.add_argument("out")
+    p.add_argument("--frame", type=int, help="frame of the cameras for xcp (default: start of the active range)")
+    p.set_defaults(func=_cmd_export)
 
     p = sub.add_parser("bench", help="run the benchmarks (one JSON object per line with --json)")
     p.add_argument("--json", action="store_true")

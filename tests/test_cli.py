@@ -85,3 +85,22 @@ def test_info_on_the_real_facial_c3d(capsys):
     info = json.loads(capsys.readouterr().out)
     assert info["points"] == 38 and info["frames"] == 3000 and info["rate"] == 100
     assert info["warnings"]  # the malformed LABELS record is reported, not fatal
+
+
+def test_export_c3d_and_xcp(tmp_path):
+    from carapost.io.c3d import read_c3d
+    from carapost.io.xcp import read_xcp
+
+    p = make_project(frames=10, with_rig=True)
+    cara.save_project(p, tmp_path / "t.cara")
+    assert main(["export", "c3d", str(tmp_path / "t.cara"), str(tmp_path / "t.c3d")]) == 0
+    d = read_c3d(tmp_path / "t.c3d")
+    assert d.positions.shape == (10, len(p.points), 3)
+    assert main(["export", "xcp", str(tmp_path / "t.cara"), str(tmp_path / "t.xcp"), "--frame", "3"]) == 0
+    x = read_xcp(tmp_path / "t.xcp")
+    assert len(x.cameras) == 4
+    import numpy as np
+
+    assert np.allclose(x.cameras[1].at(0).position, p.rig.camera(1, 3).position)
+    r = run_cli("export", "xcp", tmp_path / "t.cara", tmp_path / "u.xcp", "--frame", "99")
+    assert r.returncode == 2 and "frame 99" in r.stderr
