@@ -46,3 +46,23 @@ def test_project_from_image_folders(tmp_path):
 def test_missing_source_is_named(tmp_path):
     with pytest.raises(CaraError, match="nothing_here"):
         project_from_sources([tmp_path / "nothing_here.pico"])
+
+
+def test_take_frames_apply_the_image_sequence_offset(tmp_path):
+    from carapost.core.document import Document
+    from carapost.core.edits import ShiftImageOffset
+    from carapost.io.frames import TakeFrames
+
+    frames = {ch: _frames(6, seed=ch) for ch in range(2)}
+    for ch in range(2):
+        write_pico(tmp_path / f"T_{ch}.pico", frames[ch], channel=ch)
+    p = project_from_pico(tmp_path / "T_0.pico")
+    tf = TakeFrames(p)
+    assert np.array_equal(tf.image(1, 3), frames[1][3])
+    Document(p).run(ShiftImageOffset([1]))
+    assert np.array_equal(tf.image(1, 3), frames[1][2])
+    assert not tf.image(1, 0).any()  # before the channel's first frame: blank
+    assert np.array_equal(tf.image(0, 3), frames[0][3])
+    p.sensors[0].media.path = str(tmp_path / "gone.pico")
+    assert tf.image(0, 3).shape == (48, 64) and not tf.image(0, 3).any()
+    tf.close()
