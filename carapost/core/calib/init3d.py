@@ -1,0 +1,345 @@
+"""Process > Initialize 3D: grow facial 3D points from seed points (the guide's algorithm).
+
+1. Brim points, and unused detections in the brim's image region, are excluded.
+2. Per caddy (camera pair), starting from the seeds, new detection pairs are
+   accepted iteratively: a pair must satisfy the epipolar constraint (symmetric
+   epipolar distance <= Max Allowed Symmetric Epipolar Distance), its
+   triangulated point must lie within Max Allowed Depth of a current 3D point,
+   and it must be unambiguous for both detections (the only candidate, or one
+   clearly better than the next).
+3. The two caddies' points within Max 3D Distance To Merge are merged
+   (mutual nearest neighbours with disjoint sensors).
+4. Bundle adjustment of cameras and points; then every point takes the
+   unambiguous free detection at its projection in channels where it has none,
+   observations that no longer fit are detached, and the frame is bundled again.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..camera import matrix_to_quaternion, symmetric_epipolar_distance, triangulate_many
+from ..commands import CompoundCommand
+from ..edits import AddPoints, SetCameraPoses, SetPointData
+from ..errors import CaraError
+from ..points import BRIM, FACE, SRC_DETECTION, SRC_NONE, ST_NONE, ST_RECONSTRUCTED
+from .bundle import bundle_cameras
+
+#: Dilation (px) of the brim's projected convex hull.
+BRIM_MARGIN_PX = 12.0
+#: A best candidate is "clear" when the next one is this many times worse.
+CLEAR_RATIO = 4.0
+#: Attaching a detection at a point's projection: gate and clearance (px).
+ATTACH_GATE_PX = 2.0
+ATTACH_CLEARANCE_PX = 5.0
+#: Observations farther than this (px) from the bundled point are detached.
+REJECT_PX = 2.0
+
+
+def _brim_region(cam, markers, xy, margin):
+    """Detections inside the dilated convex hull of the brim's projection."""
+    import cv2
+
+    uv = cam.project(markers)
+    uv = uv[np.all(np.isfinite(uv), axis=1)]
+    if len(uv) < 3 or len(xy) == 0:
+        return np.zeros(len(xy), bool)
+    hull = cv2.convexHull(uv.astype(np.float32))
+    return np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), True) >= -margin for x, y in xy], bool)
+
+
+def _unambiguous(ia, ib, d):
+    """Mask of candidate pairs that are the clear choice of both their detections."""
+    ok = np.ones(len(ia), bool)
+    for key in (ia, ib):
+        order = np.lexsort((d, key))
+        k, dd = key[order], d[order]
+        first = np.r_[True, k[1:] != k[:-1]]
+        start = np.flatnonzero(first)
+        counts = np.diff(np.r_[start, len(k)])
+        best = dd[start]
+        second = np.where(counts > 1, dd[np.minimum(start + 1, len(k) - 1)], np.inf)
+        good = (counts == 1) | (second >= CLEAR_RATIO * np.maximum(best, 0.05))
+        winner = np.zeros(len(k), bool)
+        winner[start[good]] = True
+        m = np.zeros(len(ia), bool)
+        m[order] = winner
+        ok &= m
+    return ok
+
+
+def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi):
+    """Step 2 for one caddy.
+
+    Parameters
+    ----------
+    xy_a, xy_b : ndarray (Na, 2), (Nb, 2)
+        Free detections (raw px).
+    seeds_X : ndarray (K, 3)
+        Current 3D points.
+
+    Returns
+    -------
+    list of (ia, ib, X)
+    """
+    if len(xy_a) == 0 or len(xy_b) == 0 or len(seeds_X) == 0:
+        return []
+    D = symmetric_epipolar_distance(cam_a, xy_a[:, None], cam_b, xy_b[None])
+    ia, ib = np.nonzero(D <= max_epi)
+    if len(ia) == 0:
+        return []
+    d = D[ia, ib]
+    uv = np.stack([xy_a[ia], xy_b[ib]], axis=1)
+    X = triangulate_many([cam_a, cam_b], uv, refine=False)
+    good = np.all(np.isfinite(X), axis=1)
+    good[good] &= (cam_a.depth(X[good]) > 0) & (cam_b.depth(X[good]) > 0)
+    ia, ib, d, X = ia[good], ib[good], d[good], X[good]
+    free_a = np.ones(len(xy_a), bool)
+    free_b = np.ones(len(xy_b), bool)
+    pts = [np.asarray(seeds_X, float)]
+    out = []
+    alive = np.ones(len(ia), bool)
+    while True:
+        tree = cKDTree(np.concatenate(pts))
+        near = tree.query(X[alive], distance_upper_bound=max_depth)[0] <= max_depth
+        idx = np.flatnonzero(alive)[near]
+        if len(idx) == 0:
+            break
+        acc = idx[_unambiguous(ia[idx], ib[idx], d[idx])]
+        if len(acc) == 0:
+            break
+        for j in acc:
+            out.append((int(ia[j]), int(ib[j]), X[j]))
+        free_a[ia[acc]] = False
+        free_b[ib[acc]] = False
+        alive &= free_a[ia] & free_b[ib]
+        pts.append(X[acc])
+    return out
+
+
+def initialize_3d(project, frame: int, params: dict | None = None):
+    """Process > Initialize 3D on ``frame``.
+
+    Parameters
+    ----------
+    project : Project
+    frame : int
+    params : dict, optional
+        ``max_allowed_depth``, ``max_3d_distance_to_merge``,
+        ``max_allowed_symmetric_epipolar_distance``; default: the project's
+        Initialize 3D Parameters.
+
+    Returns
+    -------
+    (Command, dict)
+        The command adds the new points, extends the seeds and sets the frame's
+        cameras; the report has ``new_points``, ``points``, ``rms_px``.
+
+    Raises
+    ------
+    CaraError
+        Without cameras, or without seed points (face points with 2+ views) on the frame.
+    """
+    if project.rig is None:
+        raise CaraError("no camera calibration is loaded: the cameras have no intrinsics (File > Import XCP)")
+    frame = project.clamp_frame(frame)
+    pr = project.properties
+    p = {k: float(pr[f"initialize_3d.{k}"]) for k in
+         ("max_allowed_depth", "max_3d_distance_to_merge", "max_allowed_symmetric_epipolar_distance")}
+    p.update(params or {})
+    S = project.sensor_count
+    cams = project.rig.cameras_at(frame)
+    recs = [project.detections[s].frame(frame) for s in range(S)]
+    xy = [np.column_stack([r["x"], r["y"]]).astype(float) for r in recs]
+    blocked = [np.zeros(len(r), bool) for r in recs]
+    for q in project.points.values():
+        for s in range(S):
+            if q.src[frame, s] == SRC_DETECTION and 0 <= q.det[frame, s] < len(recs[s]):
+                blocked[s][q.det[frame, s]] = True
+    if project.brim is not None and len(project.brim):
+        for s in range(S):
+            blocked[s] |= _brim_region(cams[s], project.brim.markers, xy[s], BRIM_MARGIN_PX)
+    # Points: (id or None, det (S,), X)
+    seeds = [q for q in project.face_points()
+             if q.status[frame] != ST_NONE and np.count_nonzero(q.src[frame] != SRC_NONE) >= 2]
+    if not seeds:
+        raise CaraError(f"Initialize 3D needs seed points on frame {frame}: merge the detections of 5-10 face "
+                        "markers visible in at least the two cameras of a caddy (Edit > Merge)")
+    pts = []
+    for q in seeds:
+        det = np.where(q.src[frame] == SRC_DETECTION, q.det[frame], -1).astype(int)
+        pts.append({"id": q.id, "det": det, "uv": np.where((q.src[frame] != SRC_NONE)[:, None],
+                                                           q.uv[frame].astype(float), np.nan),
+                    "X": q.pos[frame].astype(float)})
+    seed_X = np.array([d["X"] for d in pts])
+    grown = []
+    for a, b in project.caddies():
+        fa, fb = np.flatnonzero(~blocked[a]), np.flatnonzero(~blocked[b])
+        for i, j, X in grow_pair(cams[a], cams[b], xy[a][fa], xy[b][fb], seed_X, p["max_allowed_depth"],
+                                 p["max_allowed_symmetric_epipolar_distance"]):
+            det = np.full(S, -1)
+            det[a], det[b] = fa[i], fb[j]
+            grown.append({"id": None, "det": det, "X": X})
+    for g in grown:
+        g["uv"] = np.array([xy[s][g["det"][s]] if g["det"][s] >= 0 else (np.nan, np.nan) for s in range(S)])
+    pts = _merge(pts + grown, p["max_3d_distance_to_merge"])
+    # Bundle, attach in further channels, reject misfits, bundle again.
+    brim = [q for q in project.points.values() if q.kind == BRIM and project.brim is not None
+            and 0 <= q.brim_index < len(project.brim) and np.any(q.src[frame] != SRC_NONE)]
+    bX = np.array([project.brim.markers[q.brim_index] for q in brim]).reshape(-1, 3)
+    buv = np.array([np.where((q.src[frame] != SRC_NONE)[:, None], q.uv[frame].astype(float), np.nan)
+                    for q in brim]).reshape(-1, S, 2)
+    for rnd in range(2):
+        X = np.array([d["X"] for d in pts])
+        uv = np.array([d["uv"] for d in pts])
+        cams, Xo, err = bundle_cameras(cams, np.concatenate([bX, X]), np.r_[np.ones(len(bX), bool),
+                                                                             np.zeros(len(X), bool)],
+                                       np.concatenate([buv, uv]))
+        err = err[len(bX):]
+        for k, d in enumerate(pts):
+            d["X"] = Xo[len(bX) + k]
+            bad = np.isfinite(err[k]) & (err[k] > REJECT_PX)
+            if d["id"] is None:     # seeds keep what the user attached
+                d["uv"][bad] = np.nan
+                d["det"][bad] = -1
+        pts = [d for d in pts if d["id"] is not None or np.count_nonzero(np.isfinite(d["uv"][:, 0])) >= 2]
+        if rnd == 0:
+            pts = _attach_more(pts, cams, xy, blocked)
+    X = np.array([d["X"] for d in pts])
+    uv = np.array([d["uv"] for d in pts])
+    cams, Xo, err = bundle_cameras(cams, np.concatenate([bX, X]),
+                                   np.r_[np.ones(len(bX), bool), np.zeros(len(X), bool)], np.concatenate([buv, uv]))
+    err = err[len(bX):]
+    Xo = Xo[len(bX):]
+    return _command(project, frame, pts, Xo, err, cams, recs)
+
+
+def _merge(pts, dist):
+    """Merge points of the two caddies: mutual nearest neighbours within ``dist`` with disjoint sensors."""
+    while True:
+        X = np.array([d["X"] for d in pts])
+        has = np.array([np.isfinite(d["uv"][:, 0]) for d in pts])
+        tree = cKDTree(X)
+        pairs = tree.query_pairs(dist, output_type="ndarray")
+        if len(pairs) == 0:
+            return pts
+        pairs = pairs[~np.any(has[pairs[:, 0]] & has[pairs[:, 1]], axis=1)]
+        if len(pairs) == 0:
+            return pts
+        dd = np.linalg.norm(X[pairs[:, 0]] - X[pairs[:, 1]], axis=1)
+        used, gone = set(), set()
+        for k in np.argsort(dd):
+            i, j = (int(v) for v in pairs[k])
+            if i in used or j in used:
+                continue
+            # Keep the seed (a point with an id) as the survivor.
+            if pts[i]["id"] is None and pts[j]["id"] is not None:
+                i, j = j, i
+            a, b = pts[i], pts[j]
+            m = np.isfinite(b["uv"][:, 0])
+            a["uv"][m] = b["uv"][m]
+            a["det"][m] = b["det"][m]
+            a["X"] = 0.5 * (a["X"] + b["X"])
+            used |= {i, j}
+            gone.add(j)
+        pts = [d for k, d in enumerate(pts) if k not in gone]
+
+
+def _attach_more(pts, cams, xy, blocked):
+    """Attach, in channels where a point has no 2D data, the unambiguous detection at its projection.
+
+    A detection held by a grown two-view point of one caddy, while a point
+    built from other sensors projects onto it, goes to the latter and the
+    two-view point is dropped: an epipolar match of one caddy is weaker
+    evidence than an independent reconstruction (this is how an epipolar
+    mismatch of a dense set shows up).  Returns the list without dropped points.
+    """
+    S = len(cams)
+    X = np.array([d["X"] for d in pts])
+    dropped = set()
+    for s in range(S):
+        if len(xy[s]) == 0:
+            continue
+        owner = np.full(len(xy[s]), -1)
+        for k, d in enumerate(pts):
+            if d["det"][s] >= 0 and k not in dropped:
+                owner[d["det"][s]] = k
+        avail = ~blocked[s] | (owner >= 0)
+        proj = cams[s].project(X)
+        need = np.array([not np.isfinite(d["uv"][s, 0]) for d in pts]) & np.all(np.isfinite(proj), axis=1)
+        need &= np.array([k not in dropped for k in range(len(pts))])
+        rows = np.flatnonzero(need)
+        if len(rows) == 0:
+            continue
+        dist = np.linalg.norm(proj[rows][:, None] - xy[s][None], axis=-1)
+        dist = np.where(avail[None], dist, np.inf)
+        best = np.argmin(dist, axis=1)
+        bd = dist[np.arange(len(rows)), best]
+        d2 = dist.copy()
+        d2[np.arange(len(rows)), best] = np.inf
+        clear = d2.min(axis=1)
+        # Every point's projection near the detection (ambiguity between points).
+        pd = np.linalg.norm(proj[:, None] - xy[s][None][:, best], axis=-1)
+        for k, r in enumerate(rows):
+            i = int(best[k])
+            if not (bd[k] <= ATTACH_GATE_PX and clear[k] > ATTACH_CLEARANCE_PX):
+                continue
+            near = np.flatnonzero(pd[:, k] <= ATTACH_CLEARANCE_PX)
+            near = [j for j in near if j != r and j not in dropped and j != owner[i]]
+            if near:
+                continue
+            q = owner[i]
+            if q >= 0:
+                dq = pts[q]
+                views_q = set(np.flatnonzero(np.isfinite(dq["uv"][:, 0])).tolist())
+                views_r = set(np.flatnonzero(np.isfinite(pts[r]["uv"][:, 0])).tolist())
+                if not (dq["id"] is None and len(views_q) == 2 and len(views_r - views_q) >= 2):
+                    continue
+                dropped.add(int(q))
+            owner[i] = r
+            d = pts[r]
+            d["det"][s] = i
+            d["uv"][s] = xy[s][i]
+    return [d for k, d in enumerate(pts) if k not in dropped]
+
+
+def _command(project, frame, pts, X, err, cams, recs):
+    S = project.sensor_count
+    nid = project.next_point_id
+    new, updates = [], []
+    for k, d in enumerate(pts):
+        has = np.isfinite(d["uv"][:, 0])
+        row = {"src": np.where(has, np.where(d["det"] >= 0, SRC_DETECTION, SRC_NONE), SRC_NONE)[None].astype(np.uint8),
+               "det": d["det"][None].astype(np.int32),
+               "uv": d["uv"][None].astype(np.float32),
+               "score": np.array([[recs[s][d["det"][s]]["score"] if d["det"][s] >= 0 else np.nan for s in range(S)]],
+                                 np.float16),
+               "pos": X[k][None].astype(np.float32),
+               "status": np.array([ST_RECONSTRUCTED], np.uint8),
+               "residual": np.array([np.sqrt(np.nanmean(err[k] ** 2))], np.float16)}
+        if d["id"] is None:
+            q = project.new_point(FACE, point_id=nid)
+            nid += 1
+            for key, v in row.items():
+                q.arrays[key][frame:frame + 1] = v
+            new.append(q)
+        else:
+            old = project.points[d["id"]]
+            # Seeds keep non-detection 2D data (patches, targets) where they have it.
+            keep = (old.src[frame] != SRC_NONE) & (old.src[frame] != SRC_DETECTION)
+            for key in ("src", "det", "uv", "score"):
+                row[key][0, keep] = old.arrays[key][frame, keep]
+            updates.append((d["id"], frame, row))
+    q = np.stack([matrix_to_quaternion(c.rotation) for c in cams])[:, None]
+    pos = np.stack([c.position for c in cams])[:, None]
+    cmds = []
+    if new:
+        cmds.append(AddPoints(new, name="Add Points"))
+    if updates:
+        cmds.append(SetPointData(updates, name="Update Seed Points"))
+    cmds.append(SetCameraPoses(frame, q, pos, np.ones((S, 1), bool)))
+    rms = float(np.sqrt(np.nanmean(err ** 2))) if np.any(np.isfinite(err)) else float("nan")
+    cmd = CompoundCommand("Initialize 3D", cmds)
+    cmd.summary = (f"Initialize 3D: frame {frame}, {len(new)} new points ({len(pts)} in all), "
+                   f"RMS reprojection error {rms:.3f} px")
+    return cmd, {"new_points": len(new), "points": len(pts), "rms_px": rms}

@@ -1,0 +1,53 @@
+"""Initialize 3D from seeds on synthetic takes (35 and 150 markers) and the headless pipeline."""
+import numpy as np
+import pytest
+
+from carapost.core.calib.init3d import initialize_3d
+from carapost.core.calib.synthetic import make_scene
+from carapost.core.commands import UndoStack
+from carapost.core.errors import CaraError
+from carapost.core.pipeline import process_to_init3d
+
+
+def evaluate(sc, pr, frame=0):
+    """(fraction of 2+-view markers initialised, mismatched points, 3D RMS mm, camera centre error mm)."""
+    F = sc.face_det[frame]
+    inv = [{int(d): m for m, d in enumerate(F[s]) if d >= 0} for s in range(4)]
+    vis2 = np.flatnonzero((F >= 0).sum(0) >= 2)
+    got, mism, err = set(), 0, []
+    for p in pr.face_points():
+        ms = {inv[s].get(int(p.det[frame, s]), -1) for s in range(4) if p.src[frame, s] == 1}
+        if len(ms) != 1 or -1 in ms:
+            mism += 1
+            continue
+        m = ms.pop()
+        got.add(m)
+        err.append(np.linalg.norm(p.pos[frame] - sc.face[frame, m]))
+    ce = max(np.linalg.norm(a.position - b.position) for a, b in zip(pr.rig.cameras_at(frame), sc.cameras[frame]))
+    return len(got & set(vis2)) / len(vis2), mism, float(np.sqrt(np.mean(np.square(err)))), ce
+
+
+@pytest.mark.parametrize("markers,depth,seed", [(35, 60.0, 0), (150, 16.0, 0), (150, 16.0, 3)])
+def test_pipeline_initialises_face(markers, depth, seed):
+    sc = make_scene(markers, seed=seed)
+    pr = sc.project
+    pr.properties.set("initialize_3d.max_allowed_depth", depth)
+    stack = UndoStack(pr)
+    d0 = pr.digest()
+    lines = []
+    cmds = process_to_init3d(pr, sc.seeds(n_face=8, n_brim=5, seed=seed), log=lines.append, stack=stack)
+    assert len(cmds) == 5 and len(lines) == 5
+    frac, mism, rms, ce = evaluate(sc, pr)
+    assert frac >= 0.97 and mism == 0 and rms <= 0.08 and ce <= 0.3, (frac, mism, rms, ce)
+    while stack.can_undo():
+        stack.undo()
+    assert pr.digest() == d0
+
+
+def test_initialize_needs_seeds():
+    sc = make_scene(35, seed=2)
+    with pytest.raises(CaraError, match="seed points"):
+        initialize_3d(sc.project, 0)
+    sc.project.rig = None
+    with pytest.raises(CaraError, match="intrinsics"):
+        initialize_3d(sc.project, 0)
