@@ -466,4 +466,6 @@ def test_written_file_mode_and_blocks(tmp_path):
     assert raw[0] == 2 and raw[1] == 0x50 and raw[512 + 3] == 84 and raw[512 + 1] == 0x50
     assert struct.unpack_from("<H", raw, 298)[0] == 0x3039
     if os.name == "posix":
-        assert out.stat().st_mode & 0o777 == 0o666 & ~c3d_mod._UMASK
+        umask = os.umask(0)
+        os.umask(umask)
+        assert out.stat().st_mode & 0o777 == 0o666 & ~umask

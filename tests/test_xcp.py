@@ -10,6 +10,7 @@ from lxml import etree
 
 from carapost.core.camera import Camera, quaternion_to_matrix
 from carapost.core.errors import CaraError
+from carapost.io import atomic as atomic_mod
 from carapost.io import xcp as xcp_mod
 from carapost.io.xcp import read_xcp, write_xcp, xcp_from_cameras
 
@@ -372,7 +373,7 @@ def test_failed_write_leaves_old_file_and_no_partial(tmp_path, monkeypatch, fail
     def boom(*a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(xcp_mod.os, fail_at, boom)
+    monkeypatch.setattr(atomic_mod.os, fail_at, boom)
     with pytest.raises(CaraError) as info:
         write_xcp(target, x)
     assert "calib.xcp" in str(info.value) and "No space left" in str(info.value)

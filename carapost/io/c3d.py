@@ -38,7 +38,6 @@ from __future__ import annotations
 import math
 import os
 import struct
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from carapost.core.errors import CaraError
+from carapost.io.atomic import atomic_write
 
 __all__ = ["C3DData", "read_c3d", "c3d_info", "write_c3d", "PROCESSOR_INTEL", "PROCESSOR_DEC", "PROCESSOR_MIPS"]
 
@@ -753,15 +753,6 @@ def _encode_value(value: Any) -> tuple[int, list[int], bytes]:
     return bpe, dims, np.ascontiguousarray(arr, dtype=dt).tobytes()
 
 
-def _current_umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _current_umask()  # read once at import: os.umask has no read-only query
-
-
 def _auto_scale(positions: np.ndarray, valid: np.ndarray, residuals: np.ndarray | None) -> float:
     """|POINT:SCALE| so that integer coordinates fit (max/32000) and residuals fit in a byte (max/255)."""
     s = 0.0
@@ -988,40 +979,6 @@ def write_c3d(path: str | os.PathLike, positions: np.ndarray, labels: list[str],
     struct.pack_into("<HH", header, 298, _EVENT_KEY, 0)
 
     pad = (-len(data_bytes)) % BLOCK
-    _atomic_write(path, (bytes(header), bytes(section), data_bytes, b"\0" * pad))
+    atomic_write(path, (bytes(header), bytes(section), data_bytes, b"\0" * pad), "C3D file")
 
 
-def _atomic_write(path: Path, parts) -> None:
-    """Write ``parts`` to a temporary file beside ``path``, fsync, and rename it over ``path``."""
-    folder = path.parent
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    except OSError as e:
-        raise CaraError(f"cannot write C3D file: {e.strerror or e}", path) from None
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            try:
-                os.fchmod(fh.fileno(), 0o666 & ~_UMASK)  # mkstemp makes 0600; give the usual mode
-            except (AttributeError, OSError):
-                pass
-            for p in parts:
-                fh.write(p)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(e, OSError):
-            raise CaraError(f"cannot write C3D file: {e.strerror or e}", path) from None
-        raise
-    try:  # make the rename durable; not possible on every platform
-        dfd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass

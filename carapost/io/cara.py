@@ -26,7 +26,6 @@ from __future__ import annotations
 import json
 import os
 import struct
-import tempfile
 import zlib
 from pathlib import Path
 from typing import Any
@@ -34,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from .atomic import atomic_open
 from ..core.brim import Brim
 from ..core.camera import Camera
 from ..core.detections import DET_DTYPE, DetectionTable
@@ -129,56 +129,17 @@ def save_project(project: Project, path: str | Path) -> None:
         When the folder cannot be written (the old file, if any, is untouched).
     """
     path = Path(path).absolute()
-    folder = path.parent
-    if not folder.is_dir():
-        raise CaraError("the folder does not exist", folder)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    except OSError as e:
-        raise CaraError(f"cannot write here: {e.strerror}", path) from None
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(b"\0" * HEADER_SIZE)
-            w = _ArrayWriter(f)
-            manifest = _manifest(project, w, folder)
-            blob = json.dumps(manifest, separators=(",", ":"), allow_nan=True).encode("utf-8")
-            json_offset = w.pos
-            f.write(blob)
-            total = json_offset + len(blob)
-            f.seek(0)
-            f.write(_HEADER.pack(MAGIC, FORMAT_VERSION, 0, json_offset, len(blob), zlib.crc32(blob), 0, total))
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-        _fsync_dir(folder)
-    except OSError as e:
-        _unlink_quietly(tmp)
-        raise CaraError(f"cannot save: {e.strerror or e}", path) from None
-    except BaseException:
-        _unlink_quietly(tmp)
-        raise
+    with atomic_open(path, "the project") as f:
+        f.write(b"\0" * HEADER_SIZE)
+        w = _ArrayWriter(f)
+        manifest = _manifest(project, w, path.parent)
+        blob = json.dumps(manifest, separators=(",", ":"), allow_nan=True).encode("utf-8")
+        json_offset = w.pos
+        f.write(blob)
+        total = json_offset + len(blob)
+        f.seek(0)
+        f.write(_HEADER.pack(MAGIC, FORMAT_VERSION, 0, json_offset, len(blob), zlib.crc32(blob), 0, total))
     project.path = str(path)
-
-
-def _fsync_dir(folder: Path) -> None:
-    try:
-        dfd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(dfd)
-    except OSError:
-        pass
-    finally:
-        os.close(dfd)
-
-
-def _unlink_quietly(p: str) -> None:
-    try:
-        os.unlink(p)
-    except OSError:
-        pass
 
 
 def _media_json(m: MediaRef, folder: Path) -> dict:

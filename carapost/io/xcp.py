@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import bisect
 import copy
-import os
-import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,6 +35,7 @@ from lxml import etree
 
 from carapost.core.camera import Camera, quaternion_to_matrix
 from carapost.core.errors import CaraError
+from carapost.io.atomic import atomic_write
 
 __all__ = ["XcpKeyFrame", "XcpCamera", "XcpFile", "read_xcp", "write_xcp", "xcp_from_cameras"]
 
@@ -523,49 +522,6 @@ def _to_bytes(xcp: XcpFile) -> bytes:
     return b"".join(parts)
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same folder, fsync and
-    os.replace, so a crash or a full disk never leaves a half-written file."""
-    folder = path.parent if str(path.parent) else Path(".")
-    tmp = folder / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
-    try:
-        # os.open with 0o666 lets the umask decide the mode, as for any new file.
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    except OSError as exc:
-        raise CaraError(f"cannot write here: {exc.strerror or exc}", path) from None
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if path.exists():
-            try:
-                os.chmod(tmp, path.stat().st_mode & 0o7777)
-            except OSError:
-                pass
-        os.replace(tmp, path)
-    except OSError as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise CaraError(f"cannot write the file: {exc.strerror or exc}", path) from None
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    try:  # make the rename itself durable (POSIX); harmless where unsupported
-        dfd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(dfd)
-        finally:
-            os.close(dfd)
-    except OSError:
-        pass
-
-
 def write_xcp(path, xcp: XcpFile) -> None:
     """Write an XCP file atomically.
 
@@ -588,7 +544,7 @@ def write_xcp(path, xcp: XcpFile) -> None:
         data = _to_bytes(xcp)
     except ValueError as exc:
         raise CaraError(f"cannot write the calibration: {exc}", path) from None
-    _atomic_write(path, data)
+    atomic_write(path, [data], "the calibration")
 
 
 def xcp_from_cameras(cameras: list[list[tuple[int, Camera]]], name: str = "") -> XcpFile:
