@@ -1,0 +1,111 @@
+"""Candidate search and one-to-one assignment of detections to points, vectorised per frame."""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+#: Candidates considered per point and sensor (the nearest ones within the radius).
+K_CANDIDATES = 3
+
+
+def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius: np.ndarray, k: int = K_CANDIDATES):
+    """Nearest free detections of predicted positions.
+
+    Parameters
+    ----------
+    tree : cKDTree or None
+        Over one sensor's detections (corrected pixels); None when it has none.
+    free : ndarray (D,) bool
+        Detections still available.
+    pred : ndarray (N, 2)
+        Predicted corrected positions (NaN: no search).
+    radius : ndarray (N,)
+        Search radius of each point.
+
+    Returns
+    -------
+    idx : ndarray (N, k) int
+        Detection indices (-1 none), nearest first.
+    dist : ndarray (N, k)
+        Distances (inf none).
+    """
+    N = len(pred)
+    idx = np.full((N, k), -1)
+    dist = np.full((N, k), np.inf)
+    ok = np.all(np.isfinite(pred), axis=1) & (radius > 0)
+    if tree is None or tree.n == 0 or not np.any(ok):
+        return idx, dist
+    kk = min(tree.n, k + 2)   # a few spares: some neighbours are taken
+    d, i = tree.query(pred[ok], k=kk, distance_upper_bound=float(np.max(radius[ok])))
+    d = d.reshape(len(d), kk)
+    i = i.reshape(len(i), kk)
+    hit = np.isfinite(d) & (d <= radius[ok][:, None])
+    hit[hit] &= free[i[hit]]
+    # Keep the first k hits of each row in order.
+    order = np.argsort(~hit, axis=1, kind="stable")[:, :k]
+    rows = np.arange(len(d))[:, None]
+    h = hit[rows, order]
+    sub_i = np.where(h, i[rows, order], -1)
+    sub_d = np.where(h, d[rows, order], np.inf)
+    if sub_i.shape[1] < k:
+        pad = k - sub_i.shape[1]
+        sub_i = np.pad(sub_i, ((0, 0), (0, pad)), constant_values=-1)
+        sub_d = np.pad(sub_d, ((0, 0), (0, pad)), constant_values=np.inf)
+    idx[ok], dist[ok] = sub_i, sub_d
+    return idx, dist
+
+
+def size_change(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
+    """Relative change of blob width and height, ``max(|a-b| / max(a, b))`` over (major, minor).
+
+    ``prev`` (..., 2) NaN when unknown gives 0 (no evidence against the match).
+    """
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.abs(cur - prev) / np.maximum(np.maximum(cur, prev), 1e-6)
+    rel = np.nan_to_num(rel, nan=0.0)
+    return rel.max(axis=-1)
+
+
+def mutual_best(point: np.ndarray, det: np.ndarray, cost: np.ndarray, n_points: int, n_dets: int,
+                rounds: int = 4) -> np.ndarray:
+    """One-to-one assignment of candidate pairs by repeated mutual best choice.
+
+    A pair is accepted when it is the cheapest pair of both its point and its
+    detection; accepted points and detections leave, and the rest try again.
+    On sparse candidate sets this equals the greedy cheapest-first matching and
+    costs a few array passes instead of a Python loop over pairs.
+
+    Parameters
+    ----------
+    point, det : ndarray (P,) int
+        Pair members (``point`` is any slot id < n_points, e.g. point * S + sensor).
+    cost : ndarray (P,)
+
+    Returns
+    -------
+    ndarray (P,) bool
+        Accepted pairs.
+    """
+    acc = np.zeros(len(point), bool)
+    alive = np.ones(len(point), bool)
+    for _ in range(rounds):
+        if not np.any(alive):
+            break
+        c = np.where(alive, cost, np.inf)
+        bp = np.full(n_points, np.inf)
+        np.minimum.at(bp, point, c)
+        bd = np.full(n_dets, np.inf)
+        np.minimum.at(bd, det, c)
+        win = alive & (c == bp[point]) & (c == bd[det])
+        # Exact ties on one detection: keep the first.
+        _, first = np.unique(det[win], return_index=True)
+        w = np.flatnonzero(win)[first]
+        _, firstp = np.unique(point[w], return_index=True)
+        w = w[firstp]
+        acc[w] = True
+        taken_p = np.zeros(n_points, bool)
+        taken_p[point[w]] = True
+        taken_d = np.zeros(n_dets, bool)
+        taken_d[det[w]] = True
+        alive &= ~taken_p[point] & ~taken_d[det]
+    return acc

@@ -1,0 +1,464 @@
+"""One frame of automatic tracking: the guide's four steps on arrays.
+
+:class:`FrameTracker` holds the state carried from frame to frame (positions,
+velocities, last 2D samples and blob sizes, neighbour offsets, cameras) and
+:meth:`FrameTracker.step` tracks it into the next frame.  It reads the project
+but never changes it; :mod:`.api` turns the per-frame results into a command.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
+from . import elastic, patch
+from .assign import candidates, mutual_best, size_change
+from .geometry import RigState, refine_poses, reprojection, triangulate
+from .params import TrackingParams
+
+#: Pass 1 accepts a match when the next candidate is this many times farther (ratio test).
+CONFIDENT_RATIO = 2.0
+#: Brim observations farther than this (px) from the solved brim are dropped before the final solve.
+BRIM_REJECT_PX = 3.0
+#: Pose iterations for the brim solve and for the frame's camera refinement.
+BRIM_ITERATIONS = 2
+BUNDLE_ITERATIONS = 1
+
+
+@dataclass
+class FrameResult:
+    """What tracking found on one frame (rows: face points, then brim markers)."""
+
+    frame: int
+    R: np.ndarray            #: (S, 3, 3) camera rotations
+    C: np.ndarray            #: (S, 3) camera centres
+    X: np.ndarray            #: (N, 3) face positions (NaN lost)
+    status: np.ndarray       #: (N,) ST_*
+    residual: np.ndarray     #: (N,) RMS px
+    src: np.ndarray          #: (N, S) SRC_*
+    det: np.ndarray          #: (N, S)
+    uv: np.ndarray           #: (N, S, 2) raw px
+    score: np.ndarray        #: (N, S)
+    brim_det: np.ndarray     #: (B, S)
+    brim_uv: np.ndarray      #: (B, S, 2) raw px
+    brim_score: np.ndarray   #: (B, S)
+    brim_err: np.ndarray     #: (B, S) px
+
+
+class FrameData:
+    """One frame's detections in corrected pixels, indexed globally over sensors.
+
+    All sensors share one KD-tree: sensor ``s`` sits at x + ``s * SENSOR_GAP``
+    so that one query serves every camera (4 queries cost 4 times the Python overhead).
+    """
+
+    SENSOR_GAP = 1.0e6
+
+    def __init__(self, rig: RigState, recs: list[np.ndarray]):
+        self.recs = recs
+        self.raw = [np.column_stack([r["x"], r["y"]]).astype(float) for r in recs]
+        self.xy = [rig.correct(s, xy) for s, xy in enumerate(self.raw)]
+        self.size = [np.column_stack([r["major"], r["minor"]]).astype(float) for r in recs]
+        self.offsets = np.cumsum([0] + [len(r) for r in recs])
+        G = int(self.offsets[-1])
+        self.sensor = np.repeat(np.arange(len(recs)), [len(r) for r in recs])
+        self.local = np.arange(G) - self.offsets[self.sensor]
+        self.size_all = np.concatenate(self.size) if G else np.zeros((0, 2))
+        self.free = np.ones(G, bool)
+        self._tree = None
+
+    def tree(self):
+        if self._tree is None and self.offsets[-1]:
+            shifted = np.concatenate(self.xy)
+            shifted[:, 0] += self.sensor * self.SENSOR_GAP
+            self._tree = cKDTree(shifted)
+        return self._tree
+
+    def shift(self, uv: np.ndarray, sensors: np.ndarray) -> np.ndarray:
+        """Predicted corrected pixels moved into their sensor's slot of the shared tree."""
+        out = uv.copy()
+        out[:, 0] += sensors * self.SENSOR_GAP
+        return out
+
+
+class FrameTracker:
+    """Tracks a set of face points (and the brim) from frame to frame.
+
+    Parameters
+    ----------
+    rig : RigState
+        Cameras of the start frame.
+    X0 : ndarray (N, 3)
+        Face points on the start frame.
+    uv0 : ndarray (N, S, 2)
+        Their raw 2D samples on the start frame (NaN none).
+    size0 : ndarray (N, S, 2)
+        Blob (major, minor) of those samples (NaN unknown).
+    brim : ndarray (B, 3)
+        Brim markers (world = brim frame); may be empty.
+    params : TrackingParams
+    images : callable, optional
+        ``images(sensor, frame) -> (H, W) uint8`` for patch matching; None disables it.
+    pool : PatchPool, optional
+    """
+
+    def __init__(self, rig: RigState, X0, uv0, size0, brim, params: TrackingParams, images=None, pool=None):
+        self.rig = rig
+        self.p = params
+        self.images = images
+        self.pool = pool or patch.PatchPool(1)
+        self.S = rig.S
+        self.X = np.array(X0, float)
+        self.N = len(self.X)
+        self.V = np.full_like(self.X, np.nan)            # velocity per frame
+        self.uv_prev = np.array(uv0, float)              # raw px of the previous frame's samples
+        self.size = np.array(size0, float)
+        self.brim = np.asarray(brim, float).reshape(-1, 3)
+        self.prev_frame = None
+        self.nb = elastic.neighbours(self.X)
+        self.off = np.full(self.nb.shape + (3,), np.nan)
+        meas = np.all(np.isfinite(self.X), axis=1)
+        elastic.update_offsets(self.off, self.nb, self.X, meas)
+        self.X_last = self.X.copy()
+        self._img_cache: dict = {}
+
+    # ------------------------------------------------------------------ helpers
+    def _image(self, s, f):
+        key = (s, f)
+        if key not in self._img_cache:
+            if len(self._img_cache) > 4 * self.S:
+                self._img_cache.clear()
+            self._img_cache[key] = self.images(s, f)
+        return self._img_cache[key]
+
+    def _solve_brim(self, fd: FrameData):
+        """Match the brim with the Brim Point Tracking Distance and solve the cameras from it."""
+        B, S = len(self.brim), self.S
+        det = np.full((B, S), -1)
+        uv_c = np.full((B, S, 2), np.nan)
+        if B == 0:
+            return self.rig.copy(), det, uv_c, np.full((B, S), np.nan)
+        pred = self.rig.project(self.brim)
+        rows, sens = np.nonzero(np.all(np.isfinite(pred), axis=2))
+        r = np.full(len(rows), float(self.p.brim_point_tracking_distance))
+        idx, dist = candidates(fd.tree(), fd.free, fd.shift(pred[rows, sens], sens), r, k=2)
+        ok = (idx[:, 0] >= 0) & (dist[:, 1] >= CONFIDENT_RATIO * dist[:, 0])
+        j = np.flatnonzero(ok)
+        acc = mutual_best(rows[j] * S + sens[j], idx[j, 0], dist[j, 0], B * S, int(fd.offsets[-1]))
+        j = j[acc]
+        g = idx[j, 0]
+        det[rows[j], sens[j]] = fd.local[g]
+        for s in range(S):
+            m = det[:, s] >= 0
+            uv_c[m, s] = fd.xy[s][det[m, s]]
+        valid = det >= 0
+        rig = refine_poses(self.rig, self.brim, uv_c, valid, iterations=BRIM_ITERATIONS)
+        err = reprojection(rig, self.brim, uv_c, valid)
+        bad = valid & (err > BRIM_REJECT_PX)
+        if np.any(bad):
+            det[bad] = -1
+            uv_c[bad] = np.nan
+            valid &= ~bad
+            rig = refine_poses(rig, self.brim, uv_c, valid, iterations=BRIM_ITERATIONS)
+            err = reprojection(rig, self.brim, uv_c, valid)
+        for s in range(S):
+            fd.free[fd.offsets[s] + det[valid[:, s], s]] = False
+        return rig, det, uv_c, err
+
+    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3):
+        """Candidates of ``slots`` (N, S) bool: pair arrays (point, sensor, local det, distance), nearest first.
+
+        ``taken`` (G,) bool marks detections already attached this frame.
+        """
+        uv = rig.project(Xpred)
+        rows, sens = np.nonzero(slots & np.all(np.isfinite(uv), axis=2))
+        e = np.zeros(0, int)
+        if len(rows) == 0:
+            return e, e, e, np.zeros(0), uv
+        idx, dist = candidates(fd.tree(), fd.free & ~taken, fd.shift(uv[rows, sens], sens), radius[rows], k=k)
+        has = idx >= 0
+        if np.any(has):
+            # Blob Size Difference Threshold: a blob whose width or height changed too much is not the marker.
+            rel = size_change(self.size[rows, sens][:, None, :], fd.size_all[np.maximum(idx, 0)])
+            drop = has & (rel > self.p.blob_size_difference_threshold)
+            if np.any(drop):
+                dist = np.where(drop, np.inf, dist)
+                order = np.argsort(dist, axis=1, kind="stable")
+                dist = np.take_along_axis(dist, order, 1)
+                idx = np.take_along_axis(np.where(drop, -1, idx), order, 1)
+        P = np.repeat(rows, k)
+        Ss = np.repeat(sens, k)
+        D = idx.ravel()
+        Dist = dist.ravel()
+        keep = D >= 0
+        return P[keep], Ss[keep], fd.local[np.maximum(D[keep], 0)], Dist[keep], uv
+
+    # --------------------------------------------------------------------- step
+    def step(self, frame: int, recs: list[np.ndarray]) -> FrameResult:
+        """Track into ``frame`` whose detections per sensor are ``recs``."""
+        p, S, N = self.p, self.S, self.N
+        fd = FrameData(self.rig, recs)
+        offsets = fd.offsets
+        # 1. Cameras from the brim (the previous frame's cameras when the brim is not seen).
+        rig, bdet, buv_c, berr = self._solve_brim(fd)
+        # 2. Predict: constant velocity for points tracked on the previous frame,
+        #    elastic prediction from the neighbours' predictions for lost points.
+        tracked = np.all(np.isfinite(self.X), axis=1)
+        Xp = np.where(np.isfinite(self.V), self.X + self.V, self.X)
+        lost = ~tracked
+        if np.any(lost):
+            el, _ = elastic.predict(Xp, tracked, self.nb, self.off)
+            Xp[lost] = np.where(np.isfinite(el[lost]), el[lost], self.X_last[lost])
+        det = np.full((N, S), -1)
+        src = np.zeros((N, S), np.uint8)
+        uv_c = np.full((N, S, 2), np.nan)
+        uv_raw = np.full((N, S, 2), np.nan)
+        score = np.full((N, S), np.nan)
+        taken = np.zeros(int(offsets[-1]), bool)
+        # 3. Pass 1: unambiguous matches within the Face Point Tracking Distance.
+        radius = np.full(N, float(p.face_point_tracking_distance))
+        have = np.all(np.isfinite(Xp), axis=1)
+        slots = np.repeat(have[:, None], S, axis=1)
+        Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2)
+        if len(Pi):
+            key = Pi * S + Si
+            # Rows come in (slot, nearest first) order: a slot's second candidate follows its first.
+            first = np.r_[True, key[1:] != key[:-1]]
+            fj = np.flatnonzero(first)
+            d1 = Dd[fj]
+            has2 = (fj + 1 < len(key)) & ~np.r_[first[1:], True][fj]
+            second = np.where(has2, Dd[np.minimum(fj + 1, len(key) - 1)], np.inf)
+            conf = second >= CONFIDENT_RATIO * d1
+            fi = fj[conf]
+            gid = offsets[Si[fi]] + Di[fi]
+            acc = mutual_best(key[fi], gid, Dd[fi], N * S, int(offsets[-1]))
+            fi = fi[acc]
+            det[Pi[fi], Si[fi]] = Di[fi]
+            score[Pi[fi], Si[fi]] = 1.0 - Dd[fi] / radius[Pi[fi]]
+        # Anchors: points whose confident matches agree in 3D.
+        valid = det >= 0
+        for s in range(S):
+            m = valid[:, s]
+            uv_c[m, s] = fd.xy[s][det[m, s]]
+        Xa = triangulate(rig, uv_c, valid)
+        err = reprojection(rig, Xa, uv_c, valid)
+        anchor = (valid.sum(1) >= 2) & np.all(np.nan_to_num(err, nan=0.0) <= p.max_allowed_2d_projection_error, axis=1)
+        # Everything else starts again in pass 2 with better predictions.
+        det[~anchor] = -1
+        score[~anchor] = np.nan
+        uv_c[~anchor] = np.nan
+        for s in range(S):
+            taken[offsets[s] + det[det[:, s] >= 0, s]] = True
+        # 4. Pass 2: elastic prediction from the anchors, within the Max Elastic Prediction Distance.
+        el, _ = elastic.predict(Xa, anchor, self.nb, self.off)
+        X2 = np.where(anchor[:, None], Xa, np.where(np.isfinite(el), el, Xp))
+        use_el = anchor | np.all(np.isfinite(el), axis=1)
+        r2 = np.where(use_el, float(p.face_point_max_elastic_prediction_distance),
+                      float(p.face_point_tracking_distance))
+        # An anchored point's projection is known to a pixel: its further views must fit it as
+        # closely as any view must (Max Allowed 2D Projection Error), which keeps stray blobs off.
+        r2 = np.where(anchor, np.minimum(r2, float(p.max_allowed_2d_projection_error)), r2)
+        slots = (det < 0) & np.all(np.isfinite(X2), axis=1)[:, None]
+        Pi, Si, Di, Dd, uv2 = self._search(fd, rig, X2, r2, slots, taken, k=3)
+        cost = Dd / r2[Pi]
+        ncc = np.full(len(Pi), np.nan)
+        if self.images is not None and self.prev_frame is not None and len(Pi):
+            key = Pi * S + Si
+            cnt = np.bincount(key, minlength=N * S)
+            prev = self.uv_prev[Pi, Si]
+            # Appearance only where position alone is ambiguous (cost of patches).
+            need = np.flatnonzero((cnt[key] > 1) & np.all(np.isfinite(prev), axis=1))
+            if len(need):
+                jobs = [(self._image(int(Si[j]), self.prev_frame), prev[j], self._image(int(Si[j]), frame),
+                         fd.raw[int(Si[j])][Di[j]], int(p.patch_match_size)) for j in need]
+                ncc[need] = self.pool.map(patch.compare, jobs)
+                bad = need[ncc[need] < p.patch_match_threshold]
+                cost[bad] = np.inf
+                cost[need] += 0.5 * (1.0 - np.clip(ncc[need], -1, 1))
+        ok = np.isfinite(cost)
+        Pi, Si, Di, Dd, cost, ncc = Pi[ok], Si[ok], Di[ok], Dd[ok], cost[ok], ncc[ok]
+        if len(Pi):
+            acc = mutual_best(Pi * S + Si, offsets[Si] + Di, cost, N * S, int(offsets[-1]))
+            Pi, Si, Di, Dd, ncc = Pi[acc], Si[acc], Di[acc], Dd[acc], ncc[acc]
+            det[Pi, Si] = Di
+            score[Pi, Si] = np.where(np.isfinite(ncc), ncc, 1.0 - Dd / r2[Pi])
+        valid = det >= 0
+        src[valid] = SRC_DETECTION
+        for s in range(S):
+            m = valid[:, s]
+            uv_c[m, s] = fd.xy[s][det[m, s]]
+            uv_raw[m, s] = fd.raw[s][det[m, s]]
+        # 5. Patch tracking where no blob matched.
+        if self.images is not None and self.prev_frame is not None:
+            self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score)
+        valid = src != SRC_NONE
+        # 6. Triangulate, remove bad 2D projections, refine the cameras (brim fixed), triangulate again.
+        X, err = self._triangulate_clean(rig, uv_c, valid, src, det)
+        valid = src != SRC_NONE
+        multi = valid.sum(1) >= 2
+        if np.count_nonzero(multi) >= 3:
+            Xall = np.concatenate([self.brim, X[multi]])
+            uvall = np.concatenate([buv_c, uv_c[multi]])
+            vall = np.concatenate([bdet >= 0, valid[multi]])
+            rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
+            X = triangulate(rig, uv_c, valid)
+            err = reprojection(rig, X, uv_c, valid)
+        # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
+        measured = np.all(np.isfinite(X), axis=1)
+        if p.remove_bad_3d_points and np.any(measured):
+            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured)
+            valid = src != SRC_NONE
+        # 8. Single-sensor tracking of points seen by one sensor only.
+        status = np.where(measured, ST_RECONSTRUCTED, ST_NONE).astype(np.uint8)
+        one = ~measured & (valid.sum(1) == 1)
+        if np.any(one):
+            Xs = self._single_sensor(rig, X, measured, uv_c, valid, one) if p.allow_single_sensor_tracking \
+                else np.full((N, 3), np.nan)
+            okk = one & np.all(np.isfinite(Xs), axis=1)
+            X[okk] = Xs[okk]
+            status[okk] = ST_SINGLE
+            drop = one & ~okk
+            src[drop] = SRC_NONE
+        nothing = status == ST_NONE
+        src[nothing] = SRC_NONE
+        valid = src != SRC_NONE
+        det[src != SRC_DETECTION] = -1
+        uv_raw[~valid] = np.nan
+        uv_c[~valid] = np.nan
+        score[~valid] = np.nan
+        err = reprojection(rig, X, uv_c, valid)
+        nv = valid.sum(1)
+        residual = np.sqrt(np.where(valid, err, 0.0) ** 2 @ np.ones(S) / np.maximum(nv, 1))
+        residual = np.where(nv > 0, residual, np.nan)
+        X[nothing] = np.nan
+        # 9. Carry the state to the next frame.
+        have = ~nothing
+        self.V = np.where(have[:, None] & tracked[:, None], X - self.X, np.nan)
+        self.X = X.copy()
+        self.X_last[have] = X[have]
+        elastic.update_offsets(self.off, self.nb, X, status == ST_RECONSTRUCTED)
+        self.uv_prev = uv_raw.copy()
+        for s in range(S):
+            m = src[:, s] == SRC_DETECTION
+            self.size[m, s] = fd.size[s][det[m, s]]
+        self.rig = rig
+        self.prev_frame = frame
+        buv_raw = np.full(buv_c.shape, np.nan)
+        bscore = np.full(bdet.shape, np.nan)
+        for s in range(S):
+            m = bdet[:, s] >= 0
+            buv_raw[m, s] = fd.raw[s][bdet[m, s]]
+            bscore[m, s] = 1.0
+        berr = reprojection(rig, self.brim, buv_c, bdet >= 0)
+        return FrameResult(frame, rig.R.copy(), rig.C.copy(), X, status, residual, src, det, uv_raw, score,
+                           bdet, buv_raw, bscore, berr)
+
+    # --------------------------------------------------------------- sub-steps
+    def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score):
+        p, S = self.p, self.S
+        rows, sens = np.nonzero(~valid & np.all(np.isfinite(self.uv_prev), axis=2) & np.all(np.isfinite(uv2), axis=2))
+        if len(rows) == 0:
+            return
+        jobs, keep = [], []
+        for i, s in zip(rows.tolist(), sens.tolist()):
+            pred_raw = rig.cameras[s].distort(uv2[i, s])
+            w, h = rig.cameras[s].sensor_size
+            if not (np.all(np.isfinite(pred_raw)) and 0 <= pred_raw[0] < w and 0 <= pred_raw[1] < h):
+                continue
+            jobs.append((self._image(s, self.prev_frame), self.uv_prev[i, s], self._image(s, frame), pred_raw,
+                         float(r2[i]), int(p.patch_match_size)))
+            keep.append((i, s))
+        for (i, s), (xy, sc) in zip(keep, self.pool.map(patch.track_patch, jobs)):
+            if sc >= p.patch_match_threshold:
+                src[i, s] = SRC_PATCH
+                uv_raw[i, s] = xy
+                uv_c[i, s] = rig.cameras[s].correct(xy)
+                score[i, s] = sc
+
+    def _triangulate_clean(self, rig, uv_c, valid, src, det):
+        """Triangulate; with Remove Bad 2D Projections drop the worst view above the limit until all fit."""
+        X = triangulate(rig, uv_c, valid)
+        err = reprojection(rig, X, uv_c, valid)
+        if not self.p.remove_bad_2d_projections:
+            return X, err
+        for _ in range(self.S):
+            e = np.where(valid, err, -1.0)
+            worst = np.argmax(e, axis=1)
+            bad = np.flatnonzero(e[np.arange(len(e)), worst] > self.p.max_allowed_2d_projection_error)
+            if len(bad) == 0:
+                break
+            s = worst[bad]
+            valid[bad, s] = False
+            src[bad, s] = SRC_NONE
+            uv_c[bad, s] = np.nan
+            X[bad] = triangulate(rig, uv_c[bad], valid[bad])
+            err[bad] = reprojection(rig, X[bad], uv_c[bad], valid[bad])
+        # A wrong view of a 3+-view point shares its error with the others; held out, it shows in full.
+        rows = np.flatnonzero(valid.sum(1) >= 3)
+        if len(rows):
+            worst = np.argmax(np.where(valid[rows], err[rows], -1.0), axis=1)
+            v = valid[rows].copy()
+            v[np.arange(len(rows)), worst] = False
+            Xo = triangulate(rig, uv_c[rows], v)
+            e = np.linalg.norm(rig.project(Xo)[np.arange(len(rows)), worst] - uv_c[rows, worst], axis=1)
+            bad = e > self.p.max_allowed_2d_projection_error
+            if np.any(bad):
+                b, s = rows[bad], worst[bad]
+                valid[b, s] = False
+                src[b, s] = SRC_NONE
+                uv_c[b, s] = np.nan
+                X[b] = Xo[bad]
+                err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
+        return X, err
+
+    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured):
+        """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction."""
+        lim = float(self.p.max_allowed_3d_point_error)
+        pred, _ = elastic.predict(X, measured, self.nb, self.off)
+        dev = np.linalg.norm(X - pred, axis=1)
+        bad = np.flatnonzero(measured & np.isfinite(dev) & (dev > lim))
+        for i in bad.tolist():
+            views = np.flatnonzero(valid[i])
+            best, best_d = None, np.inf
+            if len(views) >= 3:
+                # Leave one view out: a single mismatched detection is the usual cause.
+                for s in views:
+                    v = valid[i].copy()
+                    v[s] = False
+                    Xi = triangulate(rig, uv_c[i:i + 1], v[None])[0]
+                    e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
+                    d = np.linalg.norm(Xi - pred[i])
+                    if d <= lim and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:
+                        best, best_d = (s, Xi, e), d
+            if best is not None:
+                s, Xi, e = best
+                valid[i, s] = False
+                src[i, s] = SRC_NONE
+                uv_c[i, s] = np.nan
+                X[i], err[i] = Xi, e
+            else:
+                valid[i] = False
+                src[i] = SRC_NONE
+                uv_c[i] = np.nan
+                X[i] = np.nan
+                measured[i] = False
+        return X, err, measured
+
+    def _single_sensor(self, rig, X, measured, uv_c, valid, one):
+        """Points on the ray of their one sample, at the depth nearest the neighbours' prediction."""
+        N = len(X)
+        out = np.full((N, 3), np.nan)
+        pred, _ = elastic.predict(X, measured, self.nb, self.off)
+        rows = np.flatnonzero(one & np.all(np.isfinite(pred), axis=1))
+        if len(rows) == 0:
+            return out
+        s = np.argmax(valid[rows], axis=1)
+        o, d = rig.rays(s, uv_c[rows, s])
+        t = np.einsum("ni,ni->n", pred[rows] - o, d)
+        Xr = o + t[:, None] * d
+        dist = np.linalg.norm(Xr - pred[rows], axis=1)
+        ok = (t > 0) & (dist <= self.p.single_sensor_tracking_threshold)
+        out[rows[ok]] = Xr[ok]
+        return out

@@ -1,0 +1,198 @@
+"""Fast per-frame geometry of the tracker, in corrected (undistorted) pixels.
+
+The tracker must run 160 points x 4 cameras in a few milliseconds per frame.
+Distorting projections (an iterative inverse) and the exact raw-pixel
+triangulation of :mod:`carapost.core.camera` cost more than the whole budget,
+so the tracker converts every detection to corrected pixels once (a cheap
+closed form) and does all of its geometry there with plain projection matrices.
+Lens distortion of a Cara camera changes pixel scale by a few percent at the
+image corners, so distances and errors in corrected pixels are the raw-pixel
+ones to within that.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..camera import Camera
+
+
+def rodrigues(w: np.ndarray) -> np.ndarray:
+    """Rotation matrices of rotation vectors ``w`` (..., 3)."""
+    th = np.linalg.norm(w, axis=-1)[..., None, None]
+    ths = np.where(th < 1e-15, 1.0, th)
+    k = w / ths[..., 0]
+    K = np.zeros(w.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2] = -k[..., 2], k[..., 1]
+    K[..., 1, 0], K[..., 1, 2] = k[..., 2], -k[..., 0]
+    K[..., 2, 0], K[..., 2, 1] = -k[..., 1], k[..., 0]
+    return np.eye(3) + np.sin(ths) * K + (1 - np.cos(ths)) * (K @ K)
+
+
+class RigState:
+    """Poses of the S cameras of one frame as arrays (R (S,3,3), C (S,3)) plus fixed intrinsics.
+
+    Parameters
+    ----------
+    cameras : list of Camera
+        Intrinsics and the initial poses.
+    """
+
+    def __init__(self, cameras: list[Camera]):
+        self.cameras = list(cameras)
+        self.K = np.stack([c.K for c in cameras])
+        self.Kinv = np.linalg.inv(self.K)
+        self.R = np.stack([np.asarray(c.rotation, float) for c in cameras])
+        self.C = np.stack([np.asarray(c.position, float) for c in cameras])
+
+    def copy(self) -> "RigState":
+        out = RigState.__new__(RigState)
+        out.cameras, out.K, out.Kinv = self.cameras, self.K, self.Kinv
+        out.R, out.C = self.R.copy(), self.C.copy()
+        return out
+
+    @property
+    def S(self) -> int:
+        return len(self.cameras)
+
+    def P(self) -> np.ndarray:
+        """``(S, 3, 4)`` projection matrices to corrected pixels."""
+        Rt = np.concatenate([self.R, -np.einsum("sij,sj->si", self.R, self.C)[..., None]], axis=2)
+        return self.K @ Rt
+
+    def to_cameras(self) -> list[Camera]:
+        return [c.with_pose(self.R[s], self.C[s]) for s, c in enumerate(self.cameras)]
+
+    def project(self, X: np.ndarray) -> np.ndarray:
+        """Corrected pixels ``(N, S, 2)`` of world points ``X`` (N, 3); NaN behind a camera."""
+        P = self.P()
+        h = (X @ P[:, :, :3].transpose(0, 2, 1) + P[:, None, :, 3]).transpose(1, 0, 2)
+        z = h[..., 2:3]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            uv = h[..., :2] / z
+        return np.where(z > 1e-6, uv, np.nan)
+
+    def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
+        """Raw pixels of sensor ``s`` to corrected pixels."""
+        return self.cameras[s].correct(raw_xy) if len(raw_xy) else np.zeros((0, 2))
+
+    def rays(self, s: np.ndarray, uv_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Origins ``(N, 3)`` and unit directions ``(N, 3)`` of corrected pixels ``uv_c`` in sensors ``s``."""
+        h = np.concatenate([uv_c, np.ones((len(uv_c), 1))], axis=1)
+        d = np.einsum("nji,njk,nk->ni", self.R[s], self.Kinv[s], h)
+        return self.C[s], d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Batched triangulation in corrected pixels.
+
+    Linear least squares on the DLT equations, solved twice: the second solve
+    weights each view by the inverse depth found by the first, which turns the
+    algebraic error into the image-plane error (optimal to first order for
+    cameras of equal focal length, as on a Cara rig).
+
+    Parameters
+    ----------
+    uv_c : ndarray (N, S, 2)
+    valid : ndarray (N, S) bool
+
+    Returns
+    -------
+    ndarray (N, 3)
+        NaN rows for points with fewer than 2 valid views.
+    """
+    N, S = valid.shape
+    out = np.full((N, 3), np.nan)
+    ok = valid.sum(axis=1) >= 2
+    if not np.any(ok):
+        return out
+    P = rig.P()
+    v = valid[ok]
+    uv = np.where(v[..., None], uv_c[ok], 0.0)
+    # Rows u P3 - P1 and v P3 - P2: (n, S, 2, 4).
+    A = uv[..., :, None] * P[None, :, 2:3, :] - P[None, :, :2, :]
+    w = v.astype(float)
+    X = None
+    for _ in range(2):
+        Aw = (A * w[..., None, None]).reshape(len(uv), -1, 4)
+        At = Aw[..., :3].transpose(0, 2, 1)
+        M = At @ Aw[..., :3]
+        b = -(At @ Aw[..., 3:])
+        X = np.linalg.solve(M + 1e-12 * np.eye(3), b)[..., 0]
+        depth = X @ P[:, 2, :3].T + P[:, 2, 3]
+        w = np.where(v, 1.0 / np.maximum(np.abs(depth), 1e-3), 0.0) * 100.0
+    out[ok] = X
+    return out
+
+
+def reprojection(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Corrected-pixel errors ``(N, S)`` of points ``X`` against ``uv_c``; NaN where not valid."""
+    e = np.linalg.norm(rig.project(X) - uv_c, axis=-1)
+    return np.where(valid, e, np.nan)
+
+
+def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray, iterations: int = 3,
+                 huber: float = 1.0, min_obs: int = 6) -> RigState:
+    """Gauss-Newton refinement of every camera's pose on fixed 3D points (vectorised over cameras).
+
+    Parameters
+    ----------
+    X : ndarray (N, 3)
+        Points held fixed (brim markers, and this frame's triangulated face points).
+    uv_c, valid : (N, S, 2), (N, S)
+        Corrected observations.
+    huber : float
+        Huber threshold (px): a mismatched detection cannot drag a camera.
+    min_obs : int
+        Cameras with fewer observations keep their pose.
+
+    Returns
+    -------
+    RigState
+        A new state (the input is not changed).
+    """
+    out = rig.copy()
+    good = (valid & np.all(np.isfinite(X), axis=1)[:, None]).T                 # (S, N)
+    active = good.sum(axis=1) >= min_obs
+    if not np.any(active):
+        return out
+    Xf = np.where(np.isfinite(X), X, 0.0)
+    obs = np.where(good[..., None], uv_c.transpose(1, 0, 2), 0.0)             # (S, N, 2)
+    f = out.K[:, 0, 0][:, None]
+    k = out.K[:, 0, 1][:, None]
+    fa = out.K[:, 1, 1][:, None]
+    S, N = good.shape
+    eye6 = np.eye(6)
+    for _ in range(iterations):
+        xc = (Xf[None] - out.C[:, None]) @ out.R.transpose(0, 2, 1)           # (S, N, 3)
+        z = np.where(np.abs(xc[..., 2]) > 1e-6, xc[..., 2], 1e-6)
+        x, y = xc[..., 0] / z, xc[..., 1] / z
+        r = np.empty((S, N, 2))
+        r[..., 0] = f * x + k * y + out.K[:, 0, 2][:, None] - obs[..., 0]
+        r[..., 1] = fa * y + out.K[:, 1, 2][:, None] - obs[..., 1]
+        r[~good] = 0.0
+        # d(u, v) / d xc  (S, N, 2, 3)
+        Jx = np.zeros((S, N, 2, 3))
+        Jx[..., 0, 0] = f / z
+        Jx[..., 0, 1] = k / z
+        Jx[..., 0, 2] = -(f * x + k * y) / z
+        Jx[..., 1, 1] = fa / z
+        Jx[..., 1, 2] = -fa * y / z
+        # d xc / d omega = -[xc]x, so Jx @ -[xc]x = cross(xc, rows of Jx); d xc / d C = -R.
+        J = np.empty((S, N, 2, 6))
+        J[..., :3] = np.cross(xc[:, :, None, :], Jx)
+        J[..., 3:] = -(Jx @ out.R[:, None])
+        nr = np.sqrt(r[..., 0] ** 2 + r[..., 1] ** 2)
+        w = np.where(good, np.sqrt(np.minimum(1.0, huber / np.maximum(nr, 1e-12))), 0.0)
+        Jw = (J * w[..., None, None]).reshape(S, 2 * N, 6)
+        rw = (r * w[..., None]).reshape(S, 2 * N, 1)
+        Jt = Jw.transpose(0, 2, 1)
+        H = Jt @ Jw
+        g = Jt @ rw
+        H[~active] = eye6
+        g[~active] = 0.0
+        d = -np.linalg.solve(H + 1e-9 * eye6, g)[..., 0]
+        out.R = rodrigues(d[:, :3]) @ out.R
+        out.C = out.C + d[:, 3:]
+        if np.max(np.abs(d)) < 1e-7:
+            break
+    return out
