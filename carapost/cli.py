@@ -122,6 +122,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--only", action="append", help="run only benchmarks whose module name contains this")
     p.set_defaults(func=_cmd_bench)
 
+    from .gui.cli_entry import add_gui_commands  # loads no Qt until `gui` or `shortcuts` runs
+
+    add_gui_commands(sub)
     return ap
 
 
@@ -129,9 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``carapost`` console script."""
     ap = build_parser()
     args = ap.parse_args(argv)
-    if not getattr(args, "func", None):
-        ap.print_help()
-        return 0
+    if not getattr(args, "func", None):  # bare `carapost` opens the GUI (CONTRACT section 2)
+        args = ap.parse_args(["gui"])
     try:
         return int(args.func(args) or 0)
     except CaraError as e:

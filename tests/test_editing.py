@@ -154,21 +154,6 @@ def test_clear_active_range_and_remove_interpolated():
     assert not any(q.present()[10:20].any() for q in p.points.values())
 
 
-def test_remove_unused_detections_keeps_attached_ones_and_remaps():
-    p = take_with_markers(frames=5)
-    doc = Document(p)
-    pid = doc.run(editing.merge(p, 2, [], [(0, 2, 2), (1, 2, 1)])).select_after[0]
-    before = p.digest()
-    doc.run(editing.remove_unused_detections(p))
-    assert p.detections[0].count(2) == 1 and p.detections[0].count(0) == 0
-    pt = p.point(pid)
-    assert pt.det[2, 0] == 0 and pt.det[2, 1] == 0
-    rec = p.detections[0].frame(2)[0]
-    np.testing.assert_allclose([rec["x"], rec["y"]], pt.uv[2, 0])
-    doc.undo()
-    assert p.digest() == before
-
-
 def test_labels_sticks_channels():
     p = take_with_markers()
     doc = Document(p)

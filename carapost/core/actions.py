@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 #: When an action is enabled (besides ``available``); the GUI evaluates these names.
-ENABLE_CONDITIONS = ("always", "project", "undo", "redo", "history", "recent", "brim_svg", "pico_blob")
+ENABLE_CONDITIONS = ("always", "project", "undo", "redo", "history", "recent", "brim_svg")
 
 #: Top-level menus in menu-bar order.
 MENUS = ("File", "Edit", "View", "Process", "Help")
@@ -99,15 +99,18 @@ ACTIONS: tuple[Action, ...] = (
     _A("file.save_as", "File", "Save As", "", "files.save_as", "project", "Save the project to a file you name."),
     _A("file.import_pico", "File", "Import Pico Files", "", "files.import_pico", "always",
        "Start a new project from the .pico files of a take (one per channel).", separator_before=True),
-    _na("file.import_brim_svg", "File", "Import Calibration Brim [svg]", "importing a calibration brim SVG", 6),
+    _A("file.import_brim_svg", "File", "Import Calibration Brim [svg]", "", "files.import_brim_svg", "project",
+       "Use a custom calibration brim: every circle of the SVG is a marker (mm)."),
     _A("file.import_xcp", "File", "Import XCP", "", "files.import_xcp", "project",
        "Set the cameras from an .xcp calibration file."),
     _A("file.import_labels_cara", "File", "Import Labels From Cara File", "", "files.import_labels_cara", "project",
        "Add the labels of another .cara project to the label list."),
     _A("file.import_labels_text", "File", "Import Labels From Text File", "", "files.import_labels_text", "project",
        "Add labels from a text file; names already present get ' - Copy' appended."),
-    _na("file.export_xcp", "File", "Export XCP [Current Frame]", "XCP export", separator_before=True),
-    _na("file.export_c3d", "File", "Export C3D", "C3D export"),
+    _A("file.export_xcp", "File", "Export XCP [Current Frame]", "", "files.export_xcp", "project",
+       "Write the cameras of the current frame to an .xcp file.", separator_before=True),
+    _A("file.export_c3d", "File", "Export C3D", "", "files.export_c3d", "project",
+       "Write the points to a .c3d file (see the Export properties)."),
     _na("file.export_fbx", "File", "Export FBX", "FBX export"),
     # Recent Files is a submenu of the last eight projects, rebuilt by the window.
     _A("file.clear_recent", "File", "Clear Recent Files", "", "files.clear_recent", "recent",
@@ -174,7 +177,7 @@ ACTIONS: tuple[Action, ...] = (
     _A("edit.restore_defaults", "Edit", "Restore Properties To Defaults", "", "edit.restore_defaults", "project",
        "Reset every property to its default."),
     _A("edit.read_blob_parameters", "Edit", "Read Blob Parameters From Pico Files", "", "edit.read_blob_parameters",
-       "pico_blob", "Set the Blob Parameters back to those stored in the imported .pico files."),
+       "project", "Set the Blob Parameters back to those stored in the imported .pico files."),
     # ------------------------------------------------------------------ View
     # View > Panels items are built from the docks (one per pane), see PANELS.
     _A("view.new_workspace", "View", "New Floating Workspace", "", "views.new_workspace", "project",
@@ -243,9 +246,11 @@ ACTIONS: tuple[Action, ...] = (
        "project", "Centre the selected points in every camera view.", while_busy=True),
     _A("process.frame_selection", "Process", "Frame Selection All 2D Views", "Shift+C", "views.frame_selection",
        "project", "Zoom every camera view onto the selected points.", while_busy=True),
-    _na("process.detect_blobs_range", "Process", "Detect Blobs [Active Range]", "blob detection", 5,
-        separator_before=True),
-    _na("process.detect_blobs_frame", "Process", "Detect Blobs [Current Frame]", "blob detection", 5),
+    _A("process.detect_blobs_range", "Process", "Detect Blobs [Active Range]", "", "process.detect_blobs", "project",
+       "Find blobs on every frame of the active range with the Blob Parameters (in the background).", arg="range",
+       separator_before=True),
+    _A("process.detect_blobs_frame", "Process", "Detect Blobs [Current Frame]", "", "process.detect_blobs",
+       "project", "Find blobs on the current frame with the Blob Parameters.", arg="frame"),
     _na("process.load_rom", "Process", "Load ROM", "ROM initialisation", separator_before=True),
     _na("process.init_from_rom", "Process", "Initialize from ROM", "ROM initialisation"),
     _na("process.init_from_rom_brim", "Process", "Initialize from ROM [Brim Only]", "ROM initialisation"),
@@ -256,10 +261,12 @@ ACTIONS: tuple[Action, ...] = (
     _na("process.rom_solve_camera", "Process > ROM Tools", "Solve ROM Camera From Correspondences", "the ROM tools"),
     _na("process.rom_solve_face", "Process > ROM Tools", "Solve ROM Face Alignment From Correspondences",
         "the ROM tools"),
-    _na("process.brim_v20", "Process", "Initialize Default Calibration Brim [v2.0]", "the calibration brims", 6,
-        separator_before=True),
-    _na("process.brim_v11", "Process", "Initialize Default Calibration Brim [v1.1]", "the calibration brims", 6),
-    _na("process.brim_v10", "Process", "Initialize Default Calibration Brim [v1.0]", "the calibration brims", 6),
+    _A("process.brim_v20", "Process", "Initialize Default Calibration Brim [v2.0]", "", "process.default_brim",
+       "project", "Use the v2.0 calibration brim.", arg="v2.0", separator_before=True),
+    _A("process.brim_v11", "Process", "Initialize Default Calibration Brim [v1.1]", "", "process.default_brim",
+       "project", "Use the v1.1 calibration brim.", arg="v1.1"),
+    _A("process.brim_v10", "Process", "Initialize Default Calibration Brim [v1.0]", "", "process.default_brim",
+       "project", "Use the v1.0 calibration brim.", arg="v1.0"),
     _na("process.solve_brim", "Process", "Solve Calibration Brim [Manual]", "the brim solve", 6),
     _na("process.initialize_3d", "Process", "Initialize 3D", "Initialize 3D", separator_before=True),
     _na("process.bundle_frame", "Process", "Bundle Current Frame [Unconstrained]", "bundle adjustment"),
@@ -349,15 +356,6 @@ def action(action_id: str) -> Action:
 def menu_actions(menu: str) -> list[Action]:
     """Actions of one menu path, in order (``"Edit"``, ``"Process > ROM Tools"``, :data:`CONTEXT_2D`)."""
     return [a for a in ACTIONS if a.menu == menu]
-
-
-def submenus(top: str) -> list[str]:
-    """Submenu paths under a top-level menu, in order of first appearance."""
-    out: list[str] = []
-    for a in ACTIONS:
-        if a.menu.startswith(top + " > ") and a.menu not in out:
-            out.append(a.menu)
-    return out
 
 
 def shortcut_table() -> list[dict]:

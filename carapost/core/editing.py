@@ -17,13 +17,10 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .commands import Command, CompoundCommand
-from .detections import DET_DTYPE, DetectionTable
-from .edits import (AddPoints, ClearPointRange, DeletePoints, RenamePoint, SetLabels, SetPointData, SetProperties,
-                    SetSticks)
+from .edits import AddPoints, ClearPointRange, DeletePoints, RenamePoint, SetLabels, SetPointData, SetSticks
 from .errors import CaraError
 from .points import (POINT_FIELDS, SRC_DETECTION, SRC_KEYFRAME, SRC_NONE, ST_INTERPOLATED, ST_NONE,
                      ST_RECONSTRUCTED, Point)
-from .progress import Progress
 from .project import Project, Stick
 
 #: Half sizes (pattern w, h, search w, h) in pixels of a new target-track keyframe.
@@ -95,32 +92,6 @@ class RenameLabel(Command):
         project.labels[project.labels.index(self.new)] = self.old
         if self._pid is not None:
             project.points[self._pid].label = self.old
-
-
-class ReplaceDetectionTables(Command):
-    """Swap whole detection tables and point ``det`` arrays (Remove Unused Detections).
-
-    The old tables are kept by reference (usually memory maps of the project
-    file), so undo costs no copy; ``do`` and ``undo`` are the same swap.
-    """
-
-    def __init__(self, tables: dict[int, DetectionTable], det_arrays: dict[int, np.ndarray], name: str):
-        self._tables = dict(tables)
-        self._dets = dict(det_arrays)
-        self.name = name
-
-    def _swap(self, project: Project) -> None:
-        for s, t in list(self._tables.items()):
-            self._tables[s], project.detections[s] = project.detections[s], t
-        for pid, arr in list(self._dets.items()):
-            p = project.point(pid)
-            self._dets[pid], p.arrays["det"] = p.arrays["det"], arr
-
-    do = _swap
-    undo = _swap
-
-    def nbytes(self) -> int:
-        return sum(a.nbytes for a in self._dets.values()) + sum(t.nbytes_overlay() for t in self._tables.values())
 
 
 def _named(cmd: Command, summary: str = "", select_after: Sequence[int] | None = None) -> Command:
@@ -427,8 +398,9 @@ def delete_detections(project: Project, detections: Iterable[Detection], keep_po
     return cmds
 
 
-def delete_selected(project: Project, point_ids: Sequence[int] = (), detections: Iterable[Detection] = ()) -> Command:
-    """Edit > Delete Selected: the selected points (whole take) and detections.
+def delete_selected(project: Project, point_ids: Sequence[int] = (), detections: Iterable[Detection] = (),
+                    sticks: Sequence[int] = ()) -> Command:
+    """Edit > Delete Selected: the selected points (whole take), detections and sticks.
 
     Raises
     ------
@@ -437,14 +409,18 @@ def delete_selected(project: Project, point_ids: Sequence[int] = (), detections:
     """
     ids = _check_points(project, point_ids, "Delete Selected", least=0)
     dets = list(detections)
-    if not ids and not dets:
-        raise CaraError("Delete Selected needs points or detections selected")
+    gone = {int(i) for i in sticks if 0 <= int(i) < len(project.sticks)}
+    if not ids and not dets and not gone:
+        raise CaraError("Delete Selected needs points, detections or sticks selected")
     cmds: list[Command] = []
+    if gone:
+        cmds.append(SetSticks([st for i, st in enumerate(project.sticks) if i not in gone], name="Delete Sticks"))
     if dets:
         cmds += delete_detections(project, dets, keep_points=set(ids))
     if ids:
         cmds.append(DeletePoints(ids))
-    parts = ([f"{len(ids)} point(s)"] if ids else []) + ([f"{len(dets)} detection(s)"] if dets else [])
+    parts = ([f"{len(ids)} point(s)"] if ids else []) + ([f"{len(dets)} detection(s)"] if dets else []) + (
+        [f"{len(gone)} stick(s)"] if gone else [])
     return _named(CompoundCommand("Delete Selected", cmds), "Delete Selected: " + " and ".join(parts), [])
 
 
@@ -539,55 +515,6 @@ def remove_interpolated(project: Project, point_ids: Sequence[int] | None, start
     if not updates:
         raise CaraError(f"{name}: no interpolated samples in frames {start}-{end}")
     return _named(SetPointData(updates, name=name), f"{name}: {n} samples of {len(updates)} point(s)")
-
-
-def remove_unused_detections(project: Project, progress: Progress | None = None) -> Command:
-    """Edit > Remove Unused Detections: every detection no point is attached to, on every frame.
-
-    Runs in a worker thread (it reads the whole take); the project is not
-    changed until the returned command is pushed.
-    """
-    progress = progress or Progress()
-    progress.start(project.sensor_count, "Remove Unused Detections")
-    tables: dict[int, DetectionTable] = {}
-    new_det = {pid: p.det.copy() for pid, p in project.points.items()}
-    removed = 0
-    for s in range(project.sensor_count):
-        table = project.detections[s]
-        offsets, chunks = table.write_chunks()
-        total = int(offsets[-1])
-        keep = np.zeros(total, bool)
-        attached = []
-        for pid, p in project.points.items():
-            frames = np.flatnonzero((p.src[:, s] == SRC_DETECTION) & (p.det[:, s] >= 0))
-            if len(frames):
-                idx = p.det[frames, s].astype(np.int64)
-                ok = idx < np.diff(offsets)[frames]
-                frames, idx = frames[ok], idx[ok]
-                keep[offsets[frames] + idx] = True
-                attached.append((pid, frames, offsets[frames] + idx))
-        progress.check()
-        if keep.all():
-            progress.step()
-            continue
-        records = np.concatenate(chunks) if chunks else np.zeros(0, DET_DTYPE)
-        rank = np.cumsum(keep) - 1
-        frame_of = np.repeat(np.arange(project.frame_count), np.diff(offsets))
-        new_counts = np.bincount(frame_of[keep], minlength=project.frame_count)
-        new_offsets = np.zeros(project.frame_count + 1, np.int64)
-        np.cumsum(new_counts, out=new_offsets[1:])
-        t = DetectionTable(project.frame_count, records[keep], new_offsets)
-        t.detected[:] = table.detected
-        tables[s] = t
-        for pid, frames, glob in attached:
-            new_det[pid][frames, s] = rank[glob] - new_offsets[frames]
-        removed += total - int(keep.sum())
-        progress.step()
-    name = "Remove Unused Detections"
-    if not tables:
-        raise CaraError(f"{name}: every detection is attached to a point")
-    changed = {pid: a for pid, a in new_det.items() if not np.array_equal(a, project.points[pid].det)}
-    return _named(ReplaceDetectionTables(tables, changed, name), f"{name}: {removed} detections removed")
 
 
 # ===================================================================== labels
@@ -706,15 +633,6 @@ def edit_target_track(project: Project, pid: int, sensor: int, frame: int, uv) -
     name = "Edit Target Track"
     return _named(CompoundCommand(name, [SetPointData([(pid, frame, row)]), SetKeyframes(pid, kf)]),
                   f"{name}: point {pid}, channel {sensor}, frame {frame}", [pid])
-
-
-def read_blob_parameters(project: Project) -> Command:
-    """Edit > Read Blob Parameters From Pico Files."""
-    if not project.pico_blob_parameters:
-        raise CaraError("the imported .pico files carry no blob parameters")
-    name = "Read Blob Parameters From Pico Files"
-    return _named(SetProperties(dict(project.pico_blob_parameters), name=name),
-                  f"{name}: {len(project.pico_blob_parameters)} parameter(s)")
 
 
 # ==================================================================== queries

@@ -192,8 +192,9 @@ class Session(QObject):
         if self.doc is None:
             return
         old = self.doc.selection
-        pts = list(old.points) if add or toggle else []
-        dets = list(old.detections) if add or toggle else []
+        keep = add or toggle
+        pts = list(old.points) if keep else []
+        dets = list(old.detections) if keep else []
         for pid in points:
             if toggle and pid in pts:
                 pts.remove(pid)
@@ -205,12 +206,16 @@ class Session(QObject):
                 dets.remove(d)
             elif d not in dets:
                 dets.append(d)
-        self.doc.set_selection(Selection(pts, dets, list(old.sensors), list(old.sticks)))
+        self.doc.set_selection(Selection(pts, dets, list(old.sensors), list(old.sticks) if keep else []))
 
     def select_sticks(self, sticks, add: bool = False) -> None:
+        """Select sticks (by index); ``add`` keeps the rest of the selection (Ctrl+click)."""
         old = self.selection
-        new = (list(old.sticks) if add else []) + [s for s in sticks if s not in old.sticks or not add]
-        self.doc.set_selection(Selection(list(old.points), list(old.detections), list(old.sensors), new))
+        if add:
+            self.doc.set_selection(Selection(list(old.points), list(old.detections), list(old.sensors),
+                                             list(dict.fromkeys(list(old.sticks) + list(sticks)))))
+        else:
+            self.doc.set_selection(Selection([], [], list(old.sensors), list(sticks)))
 
     def set_hover(self, hover) -> None:
         if hover != self.hover:

@@ -1,0 +1,1 @@
+"""The window's panes (dock widgets): Labelling, History, Selected Point, Log, Properties, Selection, Tracker."""

@@ -1,0 +1,204 @@
+"""View menu display handlers, the camera views' context-menu items, and the Help menu."""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+from PySide6.QtCore import QUrl
+from PySide6.QtGui import QDesktopServices
+from PySide6.QtWidgets import QDockWidget, QVBoxLayout, QWidget
+
+from ..core.edits import RotateSensors, SetProperties
+from .cameraview import CameraView
+
+log = logging.getLogger("carapost")
+
+
+def selection_xy(session, view: CameraView) -> np.ndarray:
+    """Raw positions in ``view``'s sensor of the selected points and detections (for centring)."""
+    fd = session.frame_data()
+    p, s, f = session.project, view.sensor, session.frame
+    xy = fd.position_2d(s)
+    rows = [r for r in (fd.row_of(pid) for pid in session.selection.points) if r >= 0]
+    out = [xy[r] for r in rows]
+    rec = p.detections[s].frame(f)
+    out += [(float(rec["x"][i]), float(rec["y"][i])) for (ds, df, i) in session.selection.detections
+            if ds == s and df == f and i < len(rec)]
+    return np.array(out, float).reshape(-1, 2)
+
+
+class ViewActions:
+    """Handlers of the View menu's display items and of Center/Frame Selection All 2D Views."""
+
+    def __init__(self, window):
+        self.w = window
+        self.locked = False
+        self._hidden_docks: list[QDockWidget] = []
+        self.workspaces: list[QWidget] = []
+
+    @property
+    def s(self):
+        return self.w.session
+
+    def toggle_display(self, name: str) -> None:
+        """A display switch of every camera view (Image, Detections, Blob Preview...)."""
+        on = not getattr(self.s.display, name)
+        self.s.set_display(name, on)
+        self.w.settings.setValue(f"display/{name}", on)
+        if name == "blob_preview":
+            log.info(f"Blob preview {'on' if on else 'off'}")
+
+    def toggle_labels_all(self) -> None:
+        p = self.s.project
+        cmd = SetProperties({"display.point_labels_all": not p.properties["display.point_labels_all"]})
+        self.s.run(cmd)
+
+    def full_screen(self) -> None:
+        """Full Screen (F)."""
+        if self.w.isFullScreen():
+            self.w.showNormal()
+        else:
+            self.w.showFullScreen()
+        self.w.actionset.sync_checks()
+
+    def toggle_docks(self) -> None:
+        """Toggle Dock Widget Visibility (Ctrl+F): hide every pane, or bring back those hidden."""
+        docks = list(self.w.docks.values())
+        shown = [d for d in docks if d.isVisible()]
+        if shown:
+            self._hidden_docks = shown
+            for d in shown:
+                d.hide()
+        else:
+            for d in self._hidden_docks or docks:
+                d.show()
+            self._hidden_docks = []
+
+    def lock_to_point(self) -> None:
+        """Lock To Point: keep the selected points centred while playing."""
+        self.locked = not self.locked
+        self.w.actionset.sync_checks()
+        if self.locked:
+            self.center_selection(quiet=True)
+
+    def on_frame(self) -> None:
+        if self.locked:
+            self.center_selection(quiet=True)
+
+    def rotate(self, steps: str) -> None:
+        """Rotate Selected Sensors (Ctrl+Right / Ctrl+Left): saved in the project."""
+        sensors = self.s.project.selected_channels(self.s.active_sensor)
+        cmd = RotateSensors(sensors, int(steps))
+        cmd.summary = f"{cmd.name}: channel(s) {', '.join(map(str, sensors))}"
+        self.s.run(cmd)
+
+    def center_selection(self, quiet: bool = False) -> None:
+        """Center Selection All 2D Views (C)."""
+        done = [v.center_on(selection_xy(self.s, v)) for v in self.w.grid.visible_views()]
+        if not any(done) and not quiet:
+            log.info("Center Selection: nothing selected to centre on")
+
+    def frame_selection(self) -> None:
+        """Frame Selection All 2D Views (Shift+C)."""
+        done = [v.frame_on(selection_xy(self.s, v)) for v in self.w.grid.visible_views()]
+        if not any(done):
+            log.info("Frame Selection: nothing selected to frame")
+
+    def new_workspace(self) -> None:
+        """New Floating Workspace: another window of camera views on the same take."""
+        from .viewgrid import ViewGrid
+
+        win = QWidget(None)
+        win.setWindowTitle(f"carapost workspace {len(self.workspaces) + 1}")
+        grid = ViewGrid(self.s, self.w.actionset.actions, win)
+        grid.on_document()
+        grid.sensorClicked.connect(self.w.edit.sensor_click)
+        grid.targetClicked.connect(self.w.edit.target_click)
+        QVBoxLayout(win).addWidget(grid)
+        win.resize(900, 600)
+        win.show()
+        self.workspaces.append(win)
+        log.info("Opened a floating workspace (its 3D view lands with a later issue)")
+
+    def show_brim_svg(self) -> None:
+        """Show Calibration Brim SVG."""
+        from PySide6.QtCore import QByteArray
+        from PySide6.QtSvgWidgets import QSvgWidget
+
+        p = self.s.project
+        w = QSvgWidget()
+        w.load(QByteArray(p.brim.svg.encode("utf-8")))
+        w.setWindowTitle(f"Calibration brim {p.brim.name}")
+        w.resize(600, 400)
+        w.show()
+        self.workspaces.append(w)
+
+
+class ContextActions:
+    """The 2D context menu's view items, acting on the view right-clicked."""
+
+    def __init__(self, window):
+        self.w = window
+
+    def _view(self) -> CameraView | None:
+        return self.w.grid.target_view()
+
+    def fit(self) -> None:
+        if v := self._view():
+            v.fit()
+
+    def actual_size(self) -> None:
+        if v := self._view():
+            v.actual_size()
+
+    def start_measurement(self) -> None:
+        if v := self._view():
+            v.start_measurement()
+
+    def clear_measurement(self) -> None:
+        if v := self._view():
+            v.clear_measurement()
+
+    def center_selection(self) -> None:
+        if v := self._view():
+            v.center_on(selection_xy(self.w.session, v))
+
+    def frame_selection(self) -> None:
+        if v := self._view():
+            v.frame_on(selection_xy(self.w.session, v))
+
+
+THIRD_PARTY = ("PySide6-Essentials (LGPL-3.0)", "shiboken6 (LGPL-3.0)", "pyqtgraph (MIT)", "numpy (BSD-3-Clause)",
+               "scipy (BSD-3-Clause)", "opencv-python-headless (Apache-2.0)", "av / PyAV (BSD-3-Clause; FFmpeg LGPL)",
+               "lxml (BSD-3-Clause)", "ezc3d (MIT)", "moderngl (MIT)", "dask / distributed (BSD-3-Clause)")
+
+
+class HelpActions:
+    """Handlers of the Help menu."""
+
+    def __init__(self, window):
+        self.w = window
+
+    def online(self) -> None:
+        QDesktopServices.openUrl(QUrl("https://docs.vicon.com/display/CaraPost"))
+
+    def installed(self) -> None:
+        doc = Path(__file__).resolve().parents[2] / "docs" / "gui.md"
+        if doc.exists():
+            QDesktopServices.openUrl(QUrl.fromLocalFile(str(doc)))
+        else:
+            self.w.prompts.info("Help", "The user guide (docs/gui.md) is not installed with this copy.")
+
+    def licensing(self) -> None:
+        self.w.prompts.info("Licensing", "carapost is free software under the MIT licence.\n"
+                                         "It needs no licence server.")
+
+    def third_party(self) -> None:
+        self.w.prompts.info("3rd Party Licenses", "carapost uses:\n" + "\n".join(f"  {t}" for t in THIRD_PARTY))
+
+    def about(self) -> None:
+        from .. import __version__
+
+        self.w.prompts.info("About carapost", f"carapost {__version__}\n"
+                                              "An open-source re-creation of Vicon CaraPost.\nMIT licence.")

@@ -1,0 +1,173 @@
+"""Up to four camera views with the layout buttons and the 2D context menu."""
+from __future__ import annotations
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtGui import QAction, QActionGroup
+from PySide6.QtWidgets import QButtonGroup, QGridLayout, QHBoxLayout, QLabel, QMenu, QToolButton, QVBoxLayout, QWidget
+
+from ..core.actions import CONTEXT_2D, menu_actions
+from .cameraview import CameraView
+
+#: name -> (tooltip, rows, columns); a layout button also restores every view's zoom.
+LAYOUTS = {
+    "1": ("One camera view", 1, 1),
+    "2": ("Two camera views side by side", 1, 2),
+    "2x2": ("Four camera views in a grid", 2, 2),
+    "1x4": ("Four camera views in a row", 1, 4),
+}
+MAX_VIEWS = 4
+
+
+class ViewGrid(QWidget):
+    """The workspace's camera views.
+
+    Parameters
+    ----------
+    session : Session
+    actions : dict, optional
+        The window's QActions by registry id (the context menu shows the 2D ones).
+    """
+
+    sensorClicked = Signal(int, bool)
+    targetClicked = Signal(int, float, float)
+
+    def __init__(self, session, actions: dict | None = None, parent=None):
+        super().__init__(parent)
+        self.session = session
+        self.actions = actions or {}
+        self.layout_name = "2x2"
+        self.context_view: CameraView | None = None
+        bar = QHBoxLayout()
+        bar.setContentsMargins(2, 0, 2, 0)
+        bar.addWidget(QLabel("Views:"))
+        self.buttons = QButtonGroup(self)
+        for name, (tip, _r, _c) in LAYOUTS.items():
+            b = QToolButton(text=name, checkable=True, toolTip=tip + " (restores zoom and scrolling)")
+            b.clicked.connect(lambda _=False, n=name: self.set_layout(n))
+            self.buttons.addButton(b)
+            bar.addWidget(b)
+        bar.addStretch(1)
+        self.grid = QGridLayout()
+        self.grid.setSpacing(2)
+        self.grid.setContentsMargins(0, 0, 0, 0)
+        self.views = [CameraView(session, i, self) for i in range(MAX_VIEWS)]
+        for v in self.views:
+            v.contextRequested.connect(self.show_context_menu)
+            v.sensorClicked.connect(self.sensorClicked)
+            v.targetClicked.connect(self.targetClicked)
+            v.activated.connect(lambda _s: self.refresh_selection())
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(2)
+        lay.addLayout(bar)
+        lay.addLayout(self.grid, 1)
+        s = session
+        s.documentChanged.connect(self.on_document)
+        s.frameChanged.connect(lambda _f: self.refresh())
+        s.projectChanged.connect(self.refresh)
+        s.displayChanged.connect(self.refresh)
+        for sig in (s.selectionChanged, s.hoverChanged, s.modeChanged, s.labelChanged):
+            sig.connect(self.refresh_selection)
+        s.loader.imageReady.connect(self.on_image)
+        self.set_layout(self.layout_name)
+
+    # ---------------------------------------------------------------- layout
+    def visible_views(self) -> list[CameraView]:
+        return [v for v in self.views if v.isVisibleTo(self)]
+
+    def set_layout(self, name: str) -> None:
+        """Show the views of layout ``name`` and fit each to its window."""
+        if name not in LAYOUTS:
+            name = "2x2"
+        self.layout_name = name
+        _tip, rows, cols = LAYOUTS[name]
+        n = rows * cols
+        p = self.session.project
+        if p is not None:
+            n = min(n, p.sensor_count)
+        for v in self.views:
+            self.grid.removeWidget(v)
+            v.hide()
+        for i, v in enumerate(self.views[:n]):
+            self.grid.addWidget(v, i // cols, i % cols)
+            v.show()
+        for b in self.buttons.buttons():
+            b.setChecked(b.text() == name)
+        for v in self.views[:n]:
+            v.fit()
+
+    def on_document(self) -> None:
+        p = self.session.project
+        for i, v in enumerate(self.views):
+            v.set_sensor(i % p.sensor_count if p is not None else i)
+        self.set_layout(self.layout_name)
+
+    # ---------------------------------------------------------------- redraw
+    def refresh(self) -> None:
+        for v in self.visible_views():
+            v.refresh()
+
+    def refresh_selection(self) -> None:
+        for v in self.visible_views():
+            v.refresh_selection()
+
+    def on_image(self, sensor: int) -> None:
+        for v in self.visible_views():
+            if v.sensor == sensor:
+                v.refresh_image()
+                if self.session.display.blob_preview:
+                    v.refresh_overlays()
+
+    def view_of_sensor(self, sensor: int) -> CameraView | None:
+        for v in self.visible_views():
+            if v.sensor == sensor:
+                return v
+        return None
+
+    # ------------------------------------------------------------ context menu
+    def build_context_menu(self, view: CameraView) -> QMenu:
+        """The 2D context menu of ``view`` (View / Sensor submenus, then the registry's 2D items)."""
+        menu = QMenu(self)
+        menu.setToolTipsVisible(True)
+        p = self.session.project
+        sensors = range(p.sensor_count) if p is not None else range(0)
+        m_view = menu.addMenu("View")
+        m_view.setToolTipsVisible(True)
+        for kind in ("3D", "Graph", "Continuity"):
+            a = m_view.addAction(kind)
+            a.setEnabled(False)
+            a.setToolTip(f"Not available yet: the {kind} view lands with a later issue.")
+        m_sensor = menu.addMenu("Sensor")
+        for m in (m_view, m_sensor):
+            group = QActionGroup(m)
+            for s in sensors:
+                a = QAction(f"Sensor {s}", m, checkable=True, checked=(s == view.sensor))
+                a.triggered.connect(lambda _=False, s=s, v=view: v.set_sensor(s))
+                group.addAction(a)
+                m.addAction(a)
+        for act in menu_actions(CONTEXT_2D):
+            if act.separator_before:
+                menu.addSeparator()
+            qa = self.actions.get(act.id)
+            if qa is not None:
+                menu.addAction(qa)
+        return menu
+
+    def show_context_menu(self, view: CameraView, pos) -> None:
+        self.context_view = view
+        self.session.set_active_sensor(view.sensor)
+        menu = self.build_context_menu(view)
+        menu.exec(pos)
+        menu.deleteLater()
+
+    def target_view(self) -> CameraView | None:
+        """The view a context-menu item acts on: the one right-clicked, else the active one."""
+        if self.context_view is not None and self.context_view.isVisibleTo(self):
+            return self.context_view
+        return self.view_of_sensor(self.session.active_sensor) or (self.visible_views() or [None])[0]
+
+    def keyPressEvent(self, ev) -> None:  # Esc leaves Add/Edit Target Track mode
+        if ev.key() == Qt.Key.Key_Escape and self.session.click_mode:
+            self.session.set_click_mode("")
+        else:
+            super().keyPressEvent(ev)
