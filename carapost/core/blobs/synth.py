@@ -227,7 +227,8 @@ def disc_image(rng, size=41, radius=4.0, blur=1.0, amplitude=100.0, background=6
     if centre is None:
         centre = (size // 2 + rng.uniform(-0.5, 0.5), size // 2 + rng.uniform(-0.5, 0.5))
     cx, cy = centre
-    y0, x0, cov = _ellipse_coverage(size, size, cx, cy, radius, radius, 0.0, ss=8)
+    # 32x32 samples per pixel: coarser sampling shifts the rendered centre by ~0.005 px.
+    y0, x0, cov = _ellipse_coverage(size, size, cx, cy, radius, radius, 0.0, ss=32)
     img = np.zeros((size, size), np.float32)
     _paste(img, y0, x0, cov, 1.0)
     img = cv2.GaussianBlur(img, (0, 0), blur) if blur > 0 else img
