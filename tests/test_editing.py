@@ -214,7 +214,6 @@ def test_navigation_queries():
     assert editing.next_label(p, "A", 1, 1, missing_only=True) == "B"   # no 2D: disconnected
     assert editing.next_label(p, "C", 1, 1, missing_only=False) == "A"
     assert editing.next_label(p, "A", 1, -1, missing_only=False) == "C"
-    assert np.isnan(editing.distance_between(p, a.id, b.id, 3))
 
 
 def test_registry_titles_and_mnemonics():

@@ -91,8 +91,25 @@ class EditActions:
         self.s.attempt(editing.clear_active_range, self.s.project)
 
     def remove_interpolated(self) -> None:
-        a, b = self.s.project.active_range
-        self.s.attempt(editing.remove_interpolated, self.s.project, self.s.selection.points, a, b)
+        """Remove Interpolated 3D Points of the selected points (all when none) in the active range."""
+        from ..core.errors import CaraError
+        from ..core.gapfill_ops import remove_interpolated
+
+        p = self.s.project
+        a, b = p.active_range
+        ids = list(self.s.selection.points) or None
+
+        def build():
+            cmd = remove_interpolated(p, ids, a, b)
+            n = sum(len(v["status"]) for _pid, _s, v in cmd.updates)
+            if not n:
+                raise CaraError(f"Remove Interpolated 3D Points: no interpolated samples in frames {a}-{b}"
+                                + (" of the selected points" if ids else ""))
+            pts = len({pid for pid, _s, _v in cmd.updates})
+            cmd.summary = f"Remove Interpolated 3D Points: {n} samples of {pts} point(s), frames {a}-{b}"
+            return cmd
+
+        self.s.attempt(build)
 
     def remove_unused_detections(self) -> None:
         from ..core.blob_ops import remove_unused_detections

@@ -98,7 +98,7 @@ class MainWindow(QMainWindow):
         self.properties = PropertiesPane(self.session, actions["edit.restore_defaults"])
         self.selection_pane = SelectionPane(self.session)
         self.tracker = TrackerPane(self.session)
-        self.selected_point = SelectedPointPane()
+        self.selected_point = SelectedPointPane(self.session)
         self.docks: dict[str, QDockWidget] = {}
         self._build_docks()
         self.actionset.build_menubar(self.menuBar(), [self.docks[name] for name, _t in PANELS])

@@ -127,15 +127,6 @@ class Navigation(QObject):
         self.s.select(points=[pid])
         log.info(f"Selected point {pid}")
 
-    def point_information(self) -> None:
-        pts = self.s.selection.points
-        if not pts:
-            self.s.error("Get Point Information needs a point selected")
-            return
-        for pid in pts:
-            for line in editing.point_information(self.s.project, pid, self.s.frame):
-                log.info(line)
-
     def select_fewest_gaps(self) -> None:
         pid = editing.point_with_fewest_gaps(self.s.project)
         if pid is None:
@@ -154,17 +145,6 @@ class Navigation(QObject):
             log.info(f"Point {pts[0]} has no gap")
         else:
             self.set_frame(f)
-
-    def distance(self) -> None:
-        pts = self.s.selection.points
-        if len(pts) != 2:
-            self.s.error("Distance Between Two Points needs two points selected")
-            return
-        d = editing.distance_between(self.s.project, pts[0], pts[1], self.s.frame)
-        if d != d:
-            log.warning(f"Distance Between Two Points: point {pts[0]} or {pts[1]} has no 3D data on frame {self.s.frame}")
-        else:
-            log.info(f"Distance between points {pts[0]} and {pts[1]} on frame {self.s.frame}: {d:.2f} mm")
 
     def select_label(self, direction: str | int) -> None:
         """Select Next Label (K) / Select Previous Label (J) in the Labelling pane."""

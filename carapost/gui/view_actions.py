@@ -105,6 +105,38 @@ class ViewActions:
         if not any(done):
             log.info("Frame Selection: nothing selected to frame")
 
+    # ------------------------------------------------------------- point read-outs (to the Log)
+    def point_information(self) -> None:
+        """Get Point Information: each selected point's 3D position, 2D data and sizes, camera distances."""
+        from ..core.calib.pointinfo import format_point_information, point_information
+
+        pts = self.s.selection.points
+        if not pts:
+            self.s.error("Get Point Information needs a point selected")
+            return
+        for pid in pts:
+            for line in format_point_information(point_information(self.s.project, pid, self.s.frame)).splitlines():
+                log.info(line)
+
+    def distance(self) -> None:
+        """Distance Between Two Points: the 3D distance of the two selected points on the current frame."""
+        from ..core.calib.pointinfo import distance_between_points
+        from ..core.errors import CaraError
+
+        pts = self.s.selection.points
+        if len(pts) != 2:
+            self.s.error(f"Distance Between Two Points needs two points selected ({len(pts)} are)")
+            return
+        try:
+            d = distance_between_points(self.s.project, pts[0], pts[1], self.s.frame)
+        except CaraError as e:
+            self.s.error(f"Distance Between Two Points: {e}")
+            return
+        labels = [self.s.project.point(i).label for i in pts]
+        named = f" ({' and '.join(lb or 'unlabelled' for lb in labels)})" if any(labels) else ""
+        log.info(f"Distance between points {pts[0]} and {pts[1]}{named} on frame {d['frame']}: "
+                 f"{d['distance']:.3f} {d['units']}")
+
     def new_workspace(self) -> None:
         """New Floating Workspace: another window of camera views on the same take."""
         from .viewgrid import ViewGrid

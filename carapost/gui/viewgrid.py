@@ -1,9 +1,14 @@
-"""Up to four camera views with the layout buttons and the 2D context menu."""
+"""Up to four view slots with the layout buttons and the View / 2D context menus.
+
+Each slot shows a camera view (Sensor 0-3), the Continuity chart or the Graph
+view; the View submenu of a slot's context menu switches it.  ``views`` are
+always the slots' camera views (hidden while their slot shows another kind)."""
 from __future__ import annotations
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QAction, QActionGroup
-from PySide6.QtWidgets import QButtonGroup, QGridLayout, QHBoxLayout, QLabel, QMenu, QToolButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import (QButtonGroup, QGridLayout, QHBoxLayout, QLabel, QMenu, QStackedWidget, QToolButton,
+                               QVBoxLayout, QWidget)
 
 from ..core.actions import CONTEXT_2D, menu_actions
 from .cameraview import CameraView
@@ -16,6 +21,8 @@ LAYOUTS = {
     "1x4": ("Four camera views in a row", 1, 4),
 }
 MAX_VIEWS = 4
+#: What a slot can show besides a sensor.
+SLOT_KINDS = ("sensor", "graph", "continuity")
 
 
 class ViewGrid(QWidget):
@@ -51,7 +58,12 @@ class ViewGrid(QWidget):
         self.grid.setSpacing(2)
         self.grid.setContentsMargins(0, 0, 0, 0)
         self.views = [CameraView(session, i, self) for i in range(MAX_VIEWS)]
-        for v in self.views:
+        self.slots = [QStackedWidget(self) for _ in range(MAX_VIEWS)]
+        #: per slot: "sensor", "graph" or "continuity"
+        self.kinds = ["sensor"] * MAX_VIEWS
+        self._others: list[dict] = [{} for _ in range(MAX_VIEWS)]   # kind -> widget, made on first use
+        for slot, v in zip(self.slots, self.views):
+            slot.addWidget(v)
             v.contextRequested.connect(self.show_context_menu)
             v.sensorClicked.connect(self.sensorClicked)
             v.targetClicked.connect(self.targetClicked)
@@ -85,16 +97,61 @@ class ViewGrid(QWidget):
         p = self.session.project
         if p is not None:
             n = min(n, p.sensor_count)
-        for v in self.views:
-            self.grid.removeWidget(v)
-            v.hide()
-        for i, v in enumerate(self.views[:n]):
-            self.grid.addWidget(v, i // cols, i % cols)
-            v.show()
+        for slot in self.slots:
+            self.grid.removeWidget(slot)
+            slot.hide()
+        for i, slot in enumerate(self.slots[:n]):
+            self.grid.addWidget(slot, i // cols, i % cols)
+            slot.show()
         for b in self.buttons.buttons():
             b.setChecked(b.text() == name)
         for v in self.views[:n]:
             v.fit()
+
+    # ------------------------------------------------------------ slot kinds
+    def slot_of(self, widget) -> int:
+        """Index of the slot showing (or holding) ``widget``; -1 when none."""
+        for i, slot in enumerate(self.slots):
+            if slot.indexOf(widget) >= 0:
+                return i
+        return -1
+
+    def slot_widget(self, index: int):
+        """What slot ``index`` shows: its CameraView, ContinuityChart or GraphView."""
+        return self.slots[index].currentWidget()
+
+    def set_slot_kind(self, index: int, kind: str, sensor: int | None = None) -> None:
+        """Show ``kind`` ("sensor", "graph" or "continuity") in slot ``index`` (``sensor``: for "sensor")."""
+        if kind not in SLOT_KINDS:
+            raise ValueError(f"unknown view kind {kind!r}")
+        slot, cam = self.slots[index], self.views[index]
+        if kind == "sensor":
+            if sensor is not None and sensor != cam.sensor:
+                cam.set_sensor(sensor)
+            w = cam
+        else:
+            w = self._others[index].get(kind)
+            if w is None:
+                if kind == "continuity":
+                    from .continuity import ContinuityChart
+                    w = ContinuityChart(self.session)
+                else:
+                    from .graphview import GraphView
+                    w = GraphView(self.session, 0)       # the guide: a Graph view starts on Sensor 0
+                w.contextRequested.connect(self.show_context_menu)
+                self._others[index][kind] = w
+                slot.addWidget(w)
+        self.kinds[index] = kind
+        slot.setCurrentWidget(w)
+        if kind == "sensor":
+            cam.refresh()
+            cam.refresh_selection()
+            cam.fit()
+
+    def charts(self, kind: str) -> list:
+        """The visible slots' widgets of ``kind`` ("graph" or "continuity")."""
+        return [self.slot_widget(i) for i, s in enumerate(self.slots)
+                if self.kinds[i] == kind and s.isVisibleTo(self)]
 
     def on_document(self) -> None:
         p = self.session.project
@@ -131,20 +188,36 @@ class ViewGrid(QWidget):
         menu.setToolTipsVisible(True)
         p = self.session.project
         sensors = range(p.sensor_count) if p is not None else range(0)
+        index = max(self.slot_of(view), 0)
+        kind = self.kinds[index]
+        cam = self.views[index]
         m_view = menu.addMenu("View")
         m_view.setToolTipsVisible(True)
-        for kind in ("3D", "Graph", "Continuity"):
-            a = m_view.addAction(kind)
-            a.setEnabled(False)
-            a.setToolTip(f"Not available yet: the {kind} view lands with a later issue.")
+        group = QActionGroup(m_view)
+        a = m_view.addAction("3D")
+        a.setEnabled(False)
+        a.setToolTip("Not available yet: the 3D view lands with a later issue.")
+        for name, k in (("Graph", "graph"), ("Continuity", "continuity")):
+            a = QAction(name, m_view, checkable=True, checked=(kind == k))
+            a.setToolTip(f"Show the {name} view in this view")
+            a.triggered.connect(lambda _=False, i=index, k=k: self.set_slot_kind(i, k))
+            group.addAction(a)
+            m_view.addAction(a)
+        for s in sensors:
+            a = QAction(f"Sensor {s}", m_view, checkable=True, checked=(kind == "sensor" and s == cam.sensor))
+            a.triggered.connect(lambda _=False, i=index, s=s: self.set_slot_kind(i, "sensor", s))
+            group.addAction(a)
+            m_view.addAction(a)
+        if kind != "sensor":                 # the Graph / Continuity context menu
+            view.add_menu_items(menu)
+            return menu
         m_sensor = menu.addMenu("Sensor")
-        for m in (m_view, m_sensor):
-            group = QActionGroup(m)
-            for s in sensors:
-                a = QAction(f"Sensor {s}", m, checkable=True, checked=(s == view.sensor))
-                a.triggered.connect(lambda _=False, s=s, v=view: v.set_sensor(s))
-                group.addAction(a)
-                m.addAction(a)
+        group = QActionGroup(m_sensor)
+        for s in sensors:
+            a = QAction(f"Sensor {s}", m_sensor, checkable=True, checked=(s == view.sensor))
+            a.triggered.connect(lambda _=False, s=s, v=view: v.set_sensor(s))
+            group.addAction(a)
+            m_sensor.addAction(a)
         for act in menu_actions(CONTEXT_2D):
             if act.separator_before:
                 menu.addSeparator()
@@ -154,8 +227,9 @@ class ViewGrid(QWidget):
         return menu
 
     def show_context_menu(self, view: CameraView, pos) -> None:
-        self.context_view = view
-        self.session.set_active_sensor(view.sensor)
+        if isinstance(view, CameraView):
+            self.context_view = view
+            self.session.set_active_sensor(view.sensor)
         menu = self.build_context_menu(view)
         menu.exec(pos)
         menu.deleteLater()
