@@ -104,3 +104,14 @@ def test_export_c3d_and_xcp(tmp_path):
     assert np.allclose(x.cameras[1].at(0).position, p.rig.camera(1, 3).position)
     r = run_cli("export", "xcp", tmp_path / "t.cara", tmp_path / "u.xcp", "--frame", "99")
     assert r.returncode == 2 and "frame 99" in r.stderr
+
+
+def test_process_refuses_bad_inputs_cleanly(tmp_path):
+    (tmp_path / "seeds.json").write_text("{not json")
+    r = run_cli("process", tmp_path / "none_0.pico", "--xcp", tmp_path / "c.xcp", "--brim", "v2.0",
+                "--seeds", tmp_path / "seeds.json", "-o", tmp_path / "out.cara")
+    assert r.returncode == 2 and "seeds.json" in r.stderr and "Traceback" not in r.stderr
+    r = run_cli("process", tmp_path / "none_0.pico", "--xcp", tmp_path / "c.xcp", "--brim", "v2.0",
+                "--seeds", tmp_path / "seeds.json", "-o", tmp_path / "no" / "out.cara")
+    assert r.returncode == 2 and "does not exist" in r.stderr
+    assert not (tmp_path / "out.cara").exists()
