@@ -230,6 +230,14 @@ def default_workers() -> int:
     return max(1, os.cpu_count() or 1)
 
 
+def _worker_init() -> None:
+    """One OpenCV thread per worker process: the pool already uses every core, and
+    OpenCV's own threads in each of them would only fight over the same cores."""
+    import cv2
+
+    cv2.setNumThreads(1)
+
+
 def detect_frames(frames: Iterable[tuple[object, np.ndarray]], properties, workers: int | None = None,
                   progress: Progress | None = None) -> dict:
     """Detect blobs on a stream of ``(key, image)`` with a pool of worker processes.
@@ -260,7 +268,7 @@ def detect_frames(frames: Iterable[tuple[object, np.ndarray]], properties, worke
         if progress is not None:
             progress.step()            # raises Cancelled when cancelled
 
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_worker_init)
     try:
         for key, img in frames:
             if progress is not None:

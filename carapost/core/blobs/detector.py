@@ -128,12 +128,17 @@ def _fit_group(imgs, x, y, r0, f, h):
     """One batched fit of blobs sharing fit level ``f`` and window ``h``."""
     sc = 2.0 ** f
     img = imgs[f]
-    pad = cv2.copyMakeBorder(img, h, h, h, h, cv2.BORDER_REPLICATE)
+    # Each level is padded once (by the largest window) and shared by all its groups.
+    hp = _WINDOWS[-1]
+    key = ("pad", f)
+    if key not in imgs:
+        imgs[key] = cv2.copyMakeBorder(img, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
+    pad = imgs[key]
     # Full-resolution pixel centre x maps to (x + 0.5) / sc - 0.5 on level f.
     fx, fy = (x + 0.5) / sc - 0.5, (y + 0.5) / sc - 0.5
     ix = np.clip(np.rint(fx).astype(np.int64), 0, img.shape[1] - 1)
     iy = np.clip(np.rint(fy).astype(np.int64), 0, img.shape[0] - 1)
-    p, good, rms = fit_ellipses(extract(pad, ix + h, iy + h, h), r0 / sc)
+    p, good, rms = fit_ellipses(extract(pad, ix + hp, iy + hp, h), r0 / sc)
     major, minor, ang = ellipse_axes(p)
     good &= np.isfinite(major) & (major < 2 * h + 1)
     # Edge width (Gaussian-equivalent sigma, full-res px) of the logistic edge: 1.6 R / k.
