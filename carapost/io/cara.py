@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import os
 import struct
+import threading
 import zlib
 from pathlib import Path
 from typing import Any
@@ -84,11 +85,42 @@ def camera_from_json(d: dict) -> Camera:
 
 # ------------------------------------------------------------------------ save
 class _ArrayWriter:
-    """Streams arrays into the file at aligned offsets and returns their references."""
+    """Streams arrays into the file at aligned offsets and returns their references.
+
+    Every ``_FLUSH_BYTES`` written, a background thread asks the kernel to write
+    the data out (``fdatasync``) while we go on filling the page cache: a gigabyte
+    save then costs about the slower of the two instead of their sum, and the
+    final fsync has little left to do.
+    """
+
+    _FLUSH_BYTES = 128 << 20
 
     def __init__(self, f):
         self.f = f
         self.pos = HEADER_SIZE
+        self._since_flush = 0
+        self._flusher: threading.Thread | None = None
+
+    def _background_flush(self) -> None:
+        if self._flusher is not None and self._flusher.is_alive():
+            return  # one writeback at a time; the next trigger picks up the rest
+        self.f.flush()
+        fd = self.f.fileno()
+        sync = getattr(os, "fdatasync", os.fsync)
+
+        def run():
+            try:
+                sync(fd)
+            except OSError:
+                pass  # the final fsync reports real errors
+
+        self._flusher = threading.Thread(target=run, daemon=True)
+        self._flusher.start()
+
+    def finish(self) -> None:
+        """Wait for the background writeback (before the file is closed)."""
+        if self._flusher is not None:
+            self._flusher.join()
 
     def _align(self) -> None:
         pad = (-self.pos) % _ALIGN
@@ -107,6 +139,10 @@ class _ArrayWriter:
             if c.nbytes:
                 self.f.write(memoryview(c).cast("B"))
                 self.pos += c.nbytes
+                self._since_flush += c.nbytes
+                if self._since_flush >= self._FLUSH_BYTES:
+                    self._since_flush = 0
+                    self._background_flush()
         return ref
 
 
@@ -132,7 +168,10 @@ def save_project(project: Project, path: str | Path) -> None:
     with atomic_open(path, "the project") as f:
         f.write(b"\0" * HEADER_SIZE)
         w = _ArrayWriter(f)
-        manifest = _manifest(project, w, path.parent)
+        try:
+            manifest = _manifest(project, w, path.parent)
+        finally:
+            w.finish()
         blob = json.dumps(manifest, separators=(",", ":"), allow_nan=True).encode("utf-8")
         json_offset = w.pos
         f.write(blob)
