@@ -125,11 +125,13 @@ def build_parser() -> argparse.ArgumentParser:
     from .blob_cli import add_blob_commands
     from .fillgaps_cli import add_fill_gaps_command
     from .process_cli import add_process_command
+    from .sample.cli import add_parser as add_sample_command
     from .gui.cli_entry import add_gui_commands  # loads no Qt until `gui` or `shortcuts` runs
 
     add_blob_commands(sub)
     add_fill_gaps_command(sub)
     add_process_command(sub)
+    add_sample_command(sub)
 
     add_gui_commands(sub)
     return ap

@@ -17,7 +17,11 @@ def add_gui_commands(subparsers) -> None:
 
 
 def gui_main(args) -> int:
-    """``carapost gui [FILE] [--screenshot OUT.png [--frame N]]``."""
+    """``carapost gui [FILE] [--screenshot OUT.png [--frame N]]``; no FILE: the built-in sample take."""
+    if not args.file:
+        from ..sample.builtin import builtin_sample_project
+
+        args.file = str(builtin_sample_project())
     if args.screenshot:
         from .app import screenshot
 
@@ -32,13 +36,8 @@ def gui_main(args) -> int:
     install_error_hook()
     win = MainWindow()
     win.show()
-    if args.file:
-        if win.files.open_path(args.file) and args.frame is not None:
-            win.navigate.set_frame(args.frame)
-    else:
-        import logging
-
-        logging.getLogger("carapost").info("Open a project (File > Open) or a take (File > Import Pico Files)")
+    if win.files.open_path(args.file) and args.frame is not None:
+        win.navigate.set_frame(args.frame)
     QTimer.singleShot(0, win.recovery.offer)
     return int(app.exec())
 
