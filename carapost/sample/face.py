@@ -51,7 +51,7 @@ _JAW_MAX_DEG = 17.0
 # t in [0, 1] from the crease to the lid margin.
 EYELID_A = 1.12
 EYELID_T_MM = 12.0     # texture scale of t (mm of lid per unit t), for texturing and markers
-_LID_OVERLAP = 2.6     # how far past the lower-lid margin a fully closed lid reaches (mm)
+_LID_OVERLAP = 4.2     # how far past the lower-lid margin a fully closed lid reaches (mm)
 _LID_THICK = 1.8       # how far the lid stands in front of the eyeball / lower lid (mm)
 
 
@@ -139,9 +139,11 @@ def jaw_weight(u, v):
     """How much of the jaw rotation a skin point follows (0 above the mouth, 1 on the chin)."""
     u = np.asarray(u, dtype=np.float64)
     v = np.asarray(v, dtype=np.float64)
-    # Between the lips the split is sharp (at the middle of the band); on the
-    # cheeks beside the mouth the skin stretches over a few centimetres.
-    sharp = _smoothstep(MOUTH_V - 0.05, MOUTH_V + 0.05, v)
+    # Between the lips the whole lip band opens: its upper edge stays with the
+    # upper lip, its lower edge goes with the jaw, and the band (the mouth's
+    # inside) spreads evenly between them.  On the cheeks beside the mouth the
+    # skin stretches over a few centimetres.
+    sharp = np.clip((v - (MOUTH_V - BAND)) / (2.0 * BAND), 0.0, 1.0)
     soft = _smoothstep(8.0, 52.0, v)
     m = _smoothstep(MOUTH_HALF - 4.0, MOUTH_HALF + 10.0, np.abs(u))
     return sharp * (1.0 - m) + soft * m
@@ -170,13 +172,15 @@ def _displacements(u, v) -> np.ndarray:
     d[4, :, 0] = -sg * 3.5 * g
     d[4, :, 1] = 3.5 * g
     d[4, :, 2] = -1.5 * g
-    # Lip curl: the upper lip rolls forward and down over the lower lip, which
-    # draws back under it.  Cameras above then lose the lower lip, those below keep it.
-    gu = _g(u / 15.0)
-    up = np.clip((v - 15.0) / (MOUTH_V - 15.0), 0.0, 1.0) ** 2 * (v <= MOUTH_V)
+    # Lip curl: the upper lip everts, its edge rolling forward and up (baring the
+    # teeth), while the lower lip draws back.  Cameras above then look down over
+    # the rolled lip onto the lower lip and lose its top; cameras below see under it.
+    # (Zero beyond the mouth corners, where no lip band takes up the step between the lips.)
+    gu = _g(u / 15.0) * (1.0 - _smoothstep(MOUTH_HALF - 8.0, MOUTH_HALF, au))
+    up = np.clip((v - 12.0) / (MOUTH_V - 12.0), 0.0, 1.0) ** 2 * (v <= MOUTH_V)
     lo = _g((v - 30.5) / 4.5) * (v > MOUTH_V)
-    d[5, :, 1] = gu * (4.2 * up - 1.0 * lo)
-    d[5, :, 2] = gu * (-10.0 * up + 3.5 * lo)
+    d[5, :, 1] = gu * (-2.0 * up + 0.5 * lo)
+    d[5, :, 2] = gu * (-13.0 * up + 3.5 * lo)
     g = _g(u / 22.0) * _g((v - MOUTH_V) / 9.0)                # pucker
     d[6, :, 0] = -0.35 * u * g
     d[6, :, 2] = -6.0 * g

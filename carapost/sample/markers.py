@@ -48,7 +48,7 @@ class MarkerSet:
 
 def named_landmarks() -> list[tuple[str, int, float, float]]:
     """The named markers, most important first: ``(label, surface, p1, p2)``."""
-    lo_l = float(eye_margins(EYE_U, 1)[1]) + 1.6     # just under the lower lash line
+    lo_l = float(eye_margins(EYE_U, 1)[1]) + 1.3     # just under the lower lash line
     out = [
         ("Nose_Tip", SURF_FACE, 0.0, -3.0),
         ("Nose_Bridge", SURF_FACE, 0.0, -32.0),
@@ -88,7 +88,8 @@ def _allowed(u, v) -> np.ndarray:
     ok = inside_face(u * 75.0 / 64.0, (v + 3.0) * 103.0 / 92.0 - 3.0)
     ok &= v > np.maximum(hairline(u) + 7.0, -80.0)
     for side in (1.0, -1.0):
-        ok &= ((u - side * EYE_U) / (EYE_HALF + 5.0)) ** 2 + ((v - EYE_V) / 8.5) ** 2 > 1.0
+        # The eye and its upper lid, which reaches up to the crease ~10 mm above the eye.
+        ok &= ((u - side * EYE_U) / (EYE_HALF + 5.0)) ** 2 + ((v - EYE_V + 1.5) / 13.0) ** 2 > 1.0
         ok &= ((u - side * 7.0) / 6.0) ** 2 + ((v - 4.0) / 5.0) ** 2 > 1.0     # nostrils
     ok &= ~((np.abs(u) < MOUTH_HALF + 4.0) & (np.abs(v - MOUTH_V) < 10.0))    # lips: named markers only
     # Not where the skin turns away from the cameras (sides of the nose tip, jaw line).
@@ -138,7 +139,14 @@ def layout_markers(n: int, rng: np.random.Generator) -> MarkerSet:
     named = named_landmarks()[:n]
     labels = [m[0] for m in named]
     surface = [m[1] for m in named]
-    pts = [(m[2], m[3]) for m in named]
+    # Nobody paints a dot exactly where the chart says: ~1 mm of scatter, a
+    # tenth of that where the anatomy is tight (lids, lips, nostrils).
+    tight = ("Eyelid", "Lip_", "Mouth_", "Nostril")
+    pts = []
+    for lab, surf, p1, p2 in named:
+        sd = 0.0 if surf != SURF_FACE else (0.15 if lab.startswith(tight) else 1.0)
+        du, dv = np.clip(rng.normal(0.0, sd, 2), -2.5 * sd, 2.5 * sd) if sd else (0.0, 0.0)
+        pts.append((p1 + du, p2 + dv))
     need = n - len(named)
     if need > 0:
         # Dart throwing: random allowed points, accepted when far enough from

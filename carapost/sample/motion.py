@@ -3,9 +3,10 @@
 All tracks are smooth functions of time drawn from a seeded generator.  Every
 take opens the same way so that even a dozen frames show what the tests need:
 frame 0 is a neutral face (the seeds are clicked on it), the upper lip curls
-over the lower one from frame 1 to 7 and holds, and both eyes blink, closed
-around frames 6 to 8.  After that, random speech-like jaw motion, blinks
-every 1-4 s and slower expressions follow.
+from frame 1 to 7 and holds, and both eyes blink, closed on frames 6 to 8.
+After that come speech-like jaw motion with one wide opening, blinks every
+1-4 s, and every slower expression at least once (more in long takes), at
+random times.
 """
 from __future__ import annotations
 
@@ -87,10 +88,18 @@ def _expressions(rng: np.random.Generator, frames: int, rate: float) -> np.ndarr
     _put(w[:, _K["blink_L"]], blink, 1.0)
     _put(w[:, _K["blink_R"]], blink, 1.0)
     t0 = 16.0 * s
-    # Speech: bursts of syllables (fast jaw motion), with pauses and the odd wide "ah".
+    span = max(frames - t0 - 0.15 * rate, 1.0)          # room for events after the opening
+    # Speech: bursts of syllables (fast jaw motion), with pauses, and one wide "ah"
+    # somewhere in every take (then more, at random).
+    ah = t0 + rng.uniform(0.0, 0.6) * span
+    _put(w[:, _K["jaw_open"]], _pulse(frames, ah, 0.08 * rate, rng.uniform(0.2, 0.4) * rate, 0.12 * rate),
+         rng.uniform(0.9, 1.0))
     t = t0 + rng.uniform(0, 10) * s
     while t < frames:
-        if rng.random() < 0.2:
+        if abs(t - ah) < 0.6 * rate:
+            t += 0.3 * rate
+            continue
+        if rng.random() < 0.15:
             dur = rng.uniform(0.35, 0.7) * rate
             _put(w[:, _K["jaw_open"]], _pulse(frames, t, 0.08 * rate, dur, 0.12 * rate), rng.uniform(0.85, 1.0))
             t += dur + 0.2 * rate
@@ -112,15 +121,16 @@ def _expressions(rng: np.random.Generator, frames: int, rate: float) -> np.ndarr
         if r < 0.1 or r > 0.2:
             _put(w[:, _K["blink_R"]], p, 1.0)
         t += rng.uniform(1.0, 4.0) * rate
-    # Slower expressions: smiles (mostly both sides), brows, lip shapes, puffed cheeks.
-    for name, per_s in (("smile", 0.35), ("brow_raise", 0.3), ("brow_furrow", 0.15), ("lip_curl", 0.12),
-                        ("pucker", 0.15), ("cheek_puff", 0.08)):
-        n = rng.poisson(per_s * max(frames - t0, 0) / rate)
+    # Slower expressions: each at least once in every take (at a random time),
+    # more in long takes: smiles and brow raises mostly on both sides.
+    for name, per_s in (("smile", 0.25), ("brow_raise", 0.2), ("brow_furrow", 0.1), ("lip_curl", 0.08),
+                        ("pucker", 0.1), ("cheek_puff", 0.05)):
+        n = 1 + rng.poisson(per_s * span / rate)
         for _ in range(n):
-            start = rng.uniform(t0, max(frames - 10, t0 + 1))
-            p = _pulse(frames, start, rng.uniform(0.15, 0.4) * rate, rng.uniform(0.1, 1.2) * rate,
-                       rng.uniform(0.2, 0.5) * rate)
-            amp = rng.uniform(0.4, 1.0)
+            start = t0 + rng.uniform(0.0, 0.85) * span
+            p = _pulse(frames, start, rng.uniform(0.12, 0.3) * rate, rng.uniform(0.1, 0.8) * rate,
+                       rng.uniform(0.15, 0.4) * rate)
+            amp = rng.uniform(0.5, 1.0)
             if name in ("smile", "brow_raise"):
                 _put(w[:, _K[name + "_L"]], p, amp * rng.uniform(0.75, 1.0))
                 _put(w[:, _K[name + "_R"]], p, amp * rng.uniform(0.75, 1.0))
@@ -172,7 +182,7 @@ def make_motion(rng: np.random.Generator, frames: int, rate: float = 60.0) -> Mo
     head_rv[:, 0] += 0.35 * jaw_s
     # The camera bar rings a little after fast jaw motion (a damped ~12 Hz
     # oscillation driven by the jaw's acceleration) and wanders slowly.
-    acc = np.gradient(np.gradient(jaw)) * rate * rate / 3600.0
+    acc = np.diff(jaw, 2, prepend=jaw[:1], append=jaw[-1:]) * rate * rate / 3600.0
     kern_t = np.arange(int(0.3 * rate)) / rate
     kern = np.exp(-kern_t / 0.06) * np.sin(2 * np.pi * 12.0 * kern_t)
     ring = np.convolve(acc, kern)[:frames]

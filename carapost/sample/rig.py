@@ -31,25 +31,26 @@ BRIM_MARKERS = np.array([
 BRIM_RADIUS = 1.75                  # mm
 BRIM_SIZE = (164.0, 38.0)           # plate width, height (mm), centred on the brim origin
 
-# The brim plate in rig coordinates: its x axis is the rig X; its y axis runs down
-# and back towards the forehead, tilted by _BRIM_TILT from the rig Y axis.
-_BRIM_TILT = np.radians(50.0)
+# The brim plate in rig coordinates, a visor over the brows: its x axis is the rig
+# X; its y axis runs back towards the forehead and a little down (tilted by
+# _BRIM_TILT from the rig Y axis), so the cameras below see its underside obliquely.
+_BRIM_TILT = np.radians(70.0)
 BRIM_RIG_R = np.column_stack([(1.0, 0.0, 0.0),
                               (0.0, np.cos(_BRIM_TILT), np.sin(_BRIM_TILT)),
                               (0.0, -np.sin(_BRIM_TILT), np.cos(_BRIM_TILT))])   # brim -> rig
-BRIM_RIG_T = np.array([0.0, -101.0, -36.0])                                       # brim origin in rig
+BRIM_RIG_T = np.array([0.0, -91.0, -30.0])                                       # brim origin in rig
 
 CHANNEL_NAMES = ("L_Upper", "L_Lower", "R_Upper", "R_Lower")
 
 # Nominal camera centres and aim points in rig coordinates: channels 0-1 on the
 # left caddy (subject's left = image right), 2-3 on the right one.
 _NOMINAL = (
-    ((47.0, -44.0, -156.0), (7.0, -16.0, 0.0)),
-    ((55.0, -8.0, -150.0), (7.0, -10.0, 0.0)),
-    ((-47.0, -44.0, -156.0), (-7.0, -16.0, 0.0)),
-    ((-55.0, -8.0, -150.0), (-7.0, -10.0, 0.0)),
+    ((47.0, -44.0, -156.0), (7.0, -24.0, 0.0)),
+    ((55.0, -14.0, -156.0), (7.0, -24.0, 0.0)),
+    ((-47.0, -44.0, -156.0), (-7.0, -24.0, 0.0)),
+    ((-55.0, -14.0, -156.0), (-7.0, -24.0, 0.0)),
 )
-_FOCAL_1280 = 560.0        # focal length (px) at 1280 px image width
+_FOCAL_1280 = 525.0        # focal length (px) at 1280 px image width
 _W0_1280 = 1.3e-7          # VICON_RADIAL w0 at 1280 px width (barrel: ~7 % at the corners)
 _W1_1280 = 1.5e-14
 
@@ -102,7 +103,7 @@ def make_rig(rng: np.random.Generator, width: int, height: int) -> RigGeometry:
     centres, rots, intr = [], [], []
     for i, (c, t) in enumerate(_NOMINAL):
         c = np.array(c) + rng.normal(0.0, 1.2, 3)
-        t = np.array(t) + rng.normal(0.0, 2.5, 3)
+        t = np.array(t) + rng.normal(0.0, 1.5, 3)
         roll = Rotation.from_euler("z", rng.normal(0.0, 0.8), degrees=True).as_matrix()
         centres.append(c)
         rots.append(roll @ look_at(c, t))

@@ -1,0 +1,79 @@
+"""``carapost sample OUT_DIR [--markers N] [--frames N] [--seed N]`` (CONTRACT section 2).
+
+``carapost/cli.py`` wires it with ``add_parser(sub)``; ``python -m carapost.sample``
+runs it on its own.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["add_parser", "run", "main"]
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``sample`` subcommand to an ``argparse`` subparsers object; returns its parser."""
+    p = subparsers.add_parser("sample", help="write a synthetic take with ground truth",
+                              description="Render a four-camera sample take (pico files) with its ground truth: "
+                                          "calibration.xcp, truth_cameras.xcp, brim.svg, labels.txt, seeds.json, "
+                                          "truth.c3d, truth.npz.")
+    _arguments(p)
+    p.set_defaults(func=run)
+    return p
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("out_dir", metavar="OUT_DIR", help="folder to write the take into (created if missing)")
+    p.add_argument("--markers", type=int, default=100, help="painted face markers, 35-160 (default 100)")
+    p.add_argument("--frames", type=int, default=120, help="frames at 60 fps (default 120)")
+    p.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives the same take (default 0)")
+    p.add_argument("--white", action="store_true", help="white markers on a black brim (default: black on white)")
+    p.add_argument("--size", default="1280x720", help="image size WxH (default 1280x720)")
+    p.add_argument("--take", default="Sample", help="take name: <take>_<channel>.pico (default Sample)")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: one per CPU, at most 4)")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def run(args) -> int:
+    """Run the subcommand from parsed arguments; prints the files written."""
+    from carapost.core.errors import CaraError
+
+    from .take import write_sample
+
+    try:
+        w, h = (int(v) for v in str(args.size).lower().split("x"))
+    except ValueError:
+        raise CaraError(f"--size must be WIDTHxHEIGHT, not {args.size!r}") from None
+    last = [-1]
+
+    def progress(done, total, message=""):
+        pct = int(100 * done / max(total, 1))
+        if not args.quiet and pct != last[0] and sys.stderr.isatty():
+            print(f"\r{message}: {pct:3d}%", end="", file=sys.stderr, flush=True)
+            last[0] = pct
+
+    info = write_sample(args.out_dir, markers=args.markers, frames=args.frames, seed=args.seed, white=args.white,
+                        width=w, height=h, take=args.take, workers=args.workers, progress=progress)
+    if not args.quiet and sys.stderr.isatty():
+        print(file=sys.stderr)
+    print(f"sample take: {info['frames']} frames, {info['markers']} face markers, {info['brim_markers']} brim "
+          f"markers, seed {info['seed']}, {info['seconds']:.1f} s")
+    for p in info["pico"]:
+        print(f"  {p}")
+    for key in ("calibration", "truth_cameras", "brim_svg", "labels", "seeds", "truth_c3d", "truth_npz"):
+        print(f"  {info[key]}")
+    return 0
+
+
+def main(argv=None) -> int:
+    """``python -m carapost.sample OUT_DIR ...``."""
+    from carapost.core.errors import CaraError
+
+    p = argparse.ArgumentParser(prog="python -m carapost.sample", description="Write a synthetic sample take.")
+    _arguments(p)
+    args = p.parse_args(argv)
+    try:
+        return run(args)
+    except CaraError as e:
+        print(f"carapost: error: {e}", file=sys.stderr)
+        return 2
