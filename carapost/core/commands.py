@@ -7,21 +7,24 @@ they compute something, the computed result) at construction or first run.
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from typing import Callable
 
 import numpy as np
 
 
-class Command:
+class Command(ABC):
     """One user action: ``do``, ``undo`` and a ``name`` for the History pane."""
 
     name: str = "Command"
 
-    def do(self, project) -> None:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def do(self, project) -> None:
+        """Apply the change to ``project`` (again, on redo)."""
 
-    def undo(self, project) -> None:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def undo(self, project) -> None:
+        """Restore exactly what :meth:`do` changed."""
 
     def nbytes(self) -> int:
         """Memory the command keeps for undo/redo (reported by the History pane)."""

@@ -9,6 +9,7 @@ shared frame cache (:mod:`carapost.io.framecache`).
 from __future__ import annotations
 
 import itertools
+from abc import ABC, abstractmethod
 import logging
 import os
 import re
@@ -28,7 +29,7 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm")
 _uids = itertools.count(1)
 
 
-class FrameSource:
+class FrameSource(ABC):
     """A channel's frames: random access by index, grey ``uint8`` images.
 
     Attributes
@@ -60,6 +61,7 @@ class FrameSource:
         self.metadata: dict[str, str] = {}
         self.warnings: list[str] = []
 
+    @abstractmethod
     def read(self, index: int) -> np.ndarray:
         """Frame ``index`` as an ``(height, width)`` ``uint8`` grey image.
 
@@ -70,7 +72,6 @@ class FrameSource:
         IndexError
             For an index outside ``0 .. frame_count-1``.
         """
-        raise NotImplementedError
 
     def gop_start(self, index: int) -> int:
         """Index of the frame decoding must start from to reach frame ``index``."""
