@@ -24,7 +24,6 @@ def builtin_sample_project(frames: int = 120, markers: int = 100) -> Path:
     Path
         ``<cache>/Sample.cara``.
     """
-    from ..core.brim import Brim  # noqa: F401  (keeps the import order light for the GUI)
     from ..core.document import Document
     from ..core.edits import SetBrim
     from ..io.brim_svg import read_brim_svg

@@ -13,7 +13,7 @@ import numpy as np
 
 __all__ = ["rasterize", "interpolate"]
 
-_SIZES = (2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
+_SIZES = (2, 3, 4, 8, 16, 32, 64, 128, 256)
 _CHUNK = 400_000        # candidate pixels per batch (bounds memory)
 
 

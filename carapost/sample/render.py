@@ -1,8 +1,9 @@
 """Draw one camera's image of one frame, and what of the markers it shows.
 
 The surfaces (skin, lip band, eyelids, brim plate) are rasterised with a depth
-buffer at half resolution for the default 1280 px images (they are smooth;
-their texture is still sampled per full-resolution pixel); the painted dots
+buffer at a third of the resolution for the default 1280 px images (they are
+smooth; their texture is still sampled per full-resolution pixel, and the
+staircases along their outlines are softened); the painted dots
 are added at full resolution with exact area coverage (:mod:`.coverage`), so
 each dot's centre is the projection of its 3D centre.  Lighting is the
 helmet's: an LED ring beside each lens, falling off with distance, with a skin
@@ -192,21 +193,22 @@ def _draw_eyes(albedo, surf_r, A, k: int, gaze, origin) -> None:
 
     ``albedo`` is the full-resolution window whose top-left raster pixel is ``origin``.
     """
-    eye_r = (surf_r == 0) & (np.abs(np.abs(A[2]) - EYE_U) < EYE_HALF) & (np.abs(A[3] - EYE_V) < 7.0)
-    ys, xs = np.nonzero(eye_r)
-    if ys.size == 0:
-        return
-    # A raster window around both eyes with a margin, upsampled like the whole image.
-    r0, r1 = max(ys.min() - 3, 0), min(ys.max() + 4, surf_r.shape[0])
-    c0, c1 = max(xs.min() - 3, 0), min(xs.max() + 4, surf_r.shape[1])
-    par = cv2.merge([A[2, r0:r1, c0:c1], A[3, r0:r1, c0:c1]])
-    sr = surf_r[r0:r1, c0:c1]
-    if k > 1:
-        par = cv2.resize(par, ((c1 - c0) * k, (r1 - r0) * k), interpolation=cv2.INTER_LINEAR)
-        sr = np.repeat(np.repeat(sr, k, axis=0), k, axis=1)
-    pu, pv = par[..., 0], par[..., 1]
-    a = albedo[(r0 - origin[0]) * k:(r1 - origin[0]) * k, (c0 - origin[1]) * k:(c1 - origin[1]) * k]
+    near = (surf_r == 0) & (np.abs(A[3] - EYE_V) < 7.0)
     for side in (1, -1):
+        ys, xs = np.nonzero(near & (np.abs(A[2] - side * EYE_U) < EYE_HALF))
+        if ys.size == 0:
+            continue
+        # A raster window around the eye with a margin, upsampled like the whole image.
+        # (Clipped to the albedo window, which holds every surface pixel.)
+        r0, r1 = max(ys.min() - 3, origin[0]), min(ys.max() + 4, origin[0] + albedo.shape[0] // k)
+        c0, c1 = max(xs.min() - 3, origin[1]), min(xs.max() + 4, origin[1] + albedo.shape[1] // k)
+        par = cv2.merge([A[2, r0:r1, c0:c1], A[3, r0:r1, c0:c1]])
+        sr = surf_r[r0:r1, c0:c1]
+        if k > 1:
+            par = cv2.resize(par, ((c1 - c0) * k, (r1 - r0) * k), interpolation=cv2.INTER_LINEAR)
+            sr = np.repeat(np.repeat(sr, k, axis=0), k, axis=1)
+        pu, pv = par[..., 0], par[..., 1]
+        a = albedo[(r0 - origin[0]) * k:(r1 - origin[0]) * k, (c0 - origin[1]) * k:(c1 - origin[1]) * k]
         up, lo, _ = eye_margins(pu, side)
         x = (pu - side * EYE_U) / EYE_HALF
         m = (sr == 0) & (np.abs(x) < 1.0) & (pv > up - 0.3) & (pv < lo + 0.3)
@@ -313,22 +315,20 @@ def render_view(scene: Scene, g: FrameGeometry, cam: Camera, c: int, f: int, *, 
         for ch in (2, 3):
             p = A[ch, r0:r1, c0:c1]
             edge |= (cv2.dilate(p, kern) - cv2.erode(p, kern)) > 3.0
-        ei, ej = np.nonzero(edge)
-        for di in range(k):
-            for dj in range(k):
-                T[ei * k + di, ej * k + dj] = tex[ei, ej]
+        size = ((c1 - c0) * k, (r1 - r0) * k)
+        edge_f = cv2.resize(edge.view(np.uint8), size, interpolation=cv2.INTER_NEAREST).view(bool)
+        np.copyto(T, cv2.resize(tex, size, interpolation=cv2.INTER_NEAREST), where=edge_f[..., None])
     else:
         T = tex
+        edge_f = None
     albedo = cv2.remap(scene.atlas.image, T[..., 0], T[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     _draw_eyes(albedo, surf_r, A, k, scene.motion.gaze[f], (r0, c0))
     shade = np.ascontiguousarray(T[..., 2])
-    if k > 1 and ei.size:
+    if edge_f is not None:
         # Those edges are staircases of raster pixels: soften them (the dots,
         # drawn next, keep their exact coverage).
-        ey = (ei[:, None] * k + np.arange(k)[None, :]).repeat(k, axis=1).ravel()
-        ex = (ej[:, None] * k + np.arange(k)[None, :]).reshape(-1, 1, k).repeat(k, axis=1).ravel()
         for a in (albedo, shade):
-            a[ey, ex] = cv2.blur(a, (2 * k + 1, 2 * k + 1))[ey, ex]
+            np.copyto(a, cv2.blur(a, (2 * k + 1, 2 * k + 1)), where=edge_f)
 
     # ---- painted markers, exact coverage, blended into the albedo
     if markers and np.any(drawn):

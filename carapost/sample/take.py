@@ -95,8 +95,10 @@ def render_channel(scene: Scene, c: int, path=None, *, lossless: bool = True, me
     return out
 
 
-def _init_worker(scene: Scene, queue) -> None:
-    _W["scene"] = scene
+def _init_worker(params: dict, queue) -> None:
+    # The scene is rebuilt from its parameters (it is a function of them): cheaper
+    # than sending megabytes through the start-up pipe of every worker.
+    _W["scene"] = build_scene(**params)
     _W["queue"] = queue
 
 
@@ -174,8 +176,10 @@ def _render_pool(scene: Scene, paths: list[Path], lossless: bool, metadata: list
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
     done = 0
+    params = dict(markers=len(scene.markers), frames=scene.frames, seed=scene.seed, white=scene.white,
+                  width=scene.width, height=scene.height, rate=scene.rate, noise=scene.noise, blur=scene.blur)
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
-                             initargs=(scene, q)) as ex:
+                             initargs=(params, q)) as ex:
         futs = [ex.submit(_worker, c, str(paths[c]), lossless, metadata[c]) for c in range(4)]
         try:
             meanwhile()
