@@ -11,9 +11,14 @@ from pathlib import Path
 
 
 def cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/carapost/sample`` (``~/.cache/carapost/sample``)."""
+    """``$XDG_CACHE_HOME/carapost/sample-<version>`` (``~/.cache/carapost/sample-0.1.0``).
+
+    Versioned so that a newer renderer or project format renders its own take.
+    """
+    from .. import __version__
+
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    return base / "carapost" / "sample"
+    return base / "carapost" / f"sample-{__version__}"
 
 
 def builtin_sample_project(frames: int = 120, markers: int = 100) -> Path:
