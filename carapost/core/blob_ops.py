@@ -30,7 +30,7 @@ from .commands import Command
 from .edits import SetFrameDetections, SetProperties
 from .errors import CaraError
 from .points import SRC_DETECTION, SRC_NONE
-from .progress import Cancelled, Progress
+from .progress import Progress
 from .properties import property_def
 
 BLOB_KEYS = ("blob.white_min_radius", "blob.white_max_radius", "blob.black_min_radius", "blob.black_max_radius",

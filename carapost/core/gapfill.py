@@ -411,7 +411,6 @@ def _combined(pos, present, p, s, e, a, b, k, context, slope_gap, validate):
         return None
     if len(ok) == 1 or validate <= 0:
         return np.mean([ests[i] for i in ok], axis=0)
-    n_frames = len(pos)
     length = e - s + 1
     have = present[:, p]
     # Candidate pseudo-gaps: p known on the pseudo-gap and one frame either

@@ -28,7 +28,7 @@ from PySide6.QtCore import QPoint, QPointF, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QPainterPath, QPen
 from PySide6.QtWidgets import QGraphicsPathItem, QMenu
 
-from ..core.continuity import C_GAP, LUT, ContinuityModel
+from ..core.continuity import C_GAP, ContinuityModel
 
 BACKGROUND = (30, 30, 30)
 ROW_PX = 15            #: initial height of a row in screen pixels (the chart shows as many as fit)

@@ -134,7 +134,6 @@ def features(lvl: np.ndarray, g: np.ndarray, ys: np.ndarray, xs: np.ndarray, dog
     n = len(ys)
     if n == 0:
         return np.zeros((0, len(FEATURE_NAMES)), np.float32)
-    r = PATCH_R
     idx = (ys[:, None] + _yy.ravel()[None, :]) * lvl.shape[1] + (xs[:, None] + _xx.ravel()[None, :])
     P = lvl.ravel()[idx]                                   # (N, 81)
     rings = np.stack([P[:, i].mean(1) for i in _RING_IDX], 1)

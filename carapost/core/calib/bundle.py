@@ -22,11 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import Camera, matrix_to_quaternion
+from ..camera import matrix_to_quaternion
 from ..commands import CompoundCommand
 from ..edits import SetCameraPoses, SetPointData
 from ..errors import CaraError
-from ..points import BRIM, SRC_NONE, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
+from ..points import BRIM, SRC_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from ..progress import Progress
 
 #: Huber threshold (px): residuals above it count linearly.
@@ -342,7 +342,6 @@ def _require_rig(project):
 def _point_updates(project, frame, ids, X, err, fixed, start=None):
     upd = []
     for i, pid in enumerate(ids):
-        p = project.points[pid]
         e = err[i]
         n = np.count_nonzero(np.isfinite(e))
         res = float(np.sqrt(np.nanmean(e ** 2))) if n else np.nan

@@ -116,7 +116,6 @@ def apply_seeds(project, seeds: dict, parts=("brim", "face")) -> Command:
 
 
 def _brim_command(project, frame, entries) -> Command:
-    S = project.sensor_count
     bp = brim_points(project)
     new, updates = [], []
     nid = project.next_point_id

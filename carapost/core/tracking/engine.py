@@ -357,7 +357,7 @@ class FrameTracker:
 
     # --------------------------------------------------------------- sub-steps
     def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score):
-        p, S = self.p, self.S
+        p = self.p
         rows, sens = np.nonzero(~valid & np.all(np.isfinite(self.uv_prev), axis=2) & np.all(np.isfinite(uv2), axis=2))
         if len(rows) == 0:
             return

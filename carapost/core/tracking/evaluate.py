@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..points import SRC_DETECTION, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
+from ..points import SRC_DETECTION, ST_NONE, ST_RECONSTRUCTED
 
 
 def identify(scene, frame: int) -> dict[int, int]:
