@@ -48,33 +48,12 @@ def _tracked_take(frames: int, markers: int):
 
 def _ten_minute_take(frames: int, points: int, dets: int, sensors: int = 4, seed: int = 0):
     """A tracked take of the size of a ten-minute capture (content random, sizes real)."""
-    from carapost.core.detections import DET_DTYPE, DetectionTable
-    from carapost.core.points import SRC_DETECTION, ST_RECONSTRUCTED
-    from carapost.core.project import Project
+    import sys
 
-    rng = np.random.default_rng(seed)
-    p = Project(frames, sensors, 60.0, name="ten_minutes")
-    for s in range(sensors):
-        rec = np.zeros(frames * dets, DET_DTYPE)
-        rec["x"] = rng.uniform(0, 1280, len(rec))
-        rec["y"] = rng.uniform(0, 720, len(rec))
-        rec["major"], rec["minor"], rec["score"] = 9.0, 7.0, 0.9
-        table = DetectionTable(frames, rec, np.arange(frames + 1, dtype=np.int64) * dets)
-        table.detected[:] = True
-        p.detections[s] = table
-    t = np.arange(frames)[:, None]
-    for i in range(points):
-        pt = p.new_point(label=f"M{i:03d}")
-        pt.pos[:] = rng.normal(0, 40, 3) + np.sin(t / 50.0 + i)
-        pt.status[:] = ST_RECONSTRUCTED
-        pt.residual[:] = 0.2
-        pt.src[:] = SRC_DETECTION
-        pt.det[:] = i
-        pt.uv[:] = rng.uniform(0, 700, 2).astype(np.float32)
-        pt.score[:] = 1.0
-        p.add_point(pt)
-    p.labels = [f"M{i:03d}" for i in range(points)]
-    return p
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_project import build_take
+
+    return build_take(frames, points, sensors, seed, detections=dets)
 
 
 def _contention() -> float:

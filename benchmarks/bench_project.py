@@ -25,18 +25,22 @@ from carapost.core.project import Project
 from carapost.io.cara import load_project, save_project
 
 
-def build_take(frames: int, points: int, sensors: int = 4, seed: int = 0) -> Project:
-    """A synthetic tracked take (content is random; sizes are what matter)."""
+def build_take(frames: int, points: int, sensors: int = 4, seed: int = 0, detections: int | None = None) -> Project:
+    """A synthetic tracked take (content is random; sizes are what matter).
+
+    ``detections`` per sensor and frame (default: one per point).
+    """
     rng = np.random.default_rng(seed)
+    dets = points if detections is None else detections
     p = Project(frames, sensors, 60.0, name="bench")
     for s in range(sensors):
-        rec = np.zeros(frames * points, DET_DTYPE)
+        rec = np.zeros(frames * dets, DET_DTYPE)
         rec["x"] = rng.uniform(0, 1280, len(rec))
         rec["y"] = rng.uniform(0, 720, len(rec))
         rec["major"] = 9.0
         rec["minor"] = 7.0
         rec["score"] = 0.9
-        table = DetectionTable(frames, rec, np.arange(frames + 1, dtype=np.int64) * points)
+        table = DetectionTable(frames, rec, np.arange(frames + 1, dtype=np.int64) * dets)
         table.detected[:] = True
         p.detections[s] = table
     base = rng.normal(0, 40, (points, 3))
@@ -51,6 +55,7 @@ def build_take(frames: int, points: int, sensors: int = 4, seed: int = 0) -> Pro
         pt.uv[:] = rng.uniform(0, 700, 2).astype(np.float32)
         pt.score[:] = 1.0
         p.add_point(pt)
+    p.labels = [f"M{i:03d}" for i in range(points)]
     return p
 
 
