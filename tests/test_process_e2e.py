@@ -1,0 +1,36 @@
+"""`carapost process` end to end on a rendered sample take (a regression check of the integration).
+
+The targets of issues 6, 7 and 9 are stricter (see the closing notes); this test
+pins what the pipeline achieves today so that integration breakage shows at once.
+"""
+import numpy as np
+
+from carapost.cli import main
+from carapost.io.c3d import read_c3d
+from carapost.io.cara import load_project
+from carapost.sample import write_sample
+
+
+def test_process_a_sample_take(tmp_path):
+    write_sample(tmp_path, markers=35, frames=12, seed=1, workers=1)
+    out = tmp_path / "out.cara"
+    # the brim's oblique dots need a lower threshold until the detector's recall improves (issue 5)
+    rc = main([
+        "process", str(tmp_path / "Sample_0.pico"), "--xcp", str(tmp_path / "calibration.xcp"),
+        "--brim-svg", str(tmp_path / "brim.svg"), "--seeds", str(tmp_path / "seeds.json"),
+        "-o", str(out), "--c3d", str(tmp_path / "out.c3d"), "--set", "blob.black_threshold=0.1"])
+    assert rc == 0
+    truth = np.load(tmp_path / "truth.npz")["face_xyz"]          # (F, M, 3)
+    p = load_project(out)
+    pts = list(p.face_points())
+    pos = np.array([np.where((q.status != 0)[:, None], q.pos, np.nan) for q in pts])  # (N, F, 3)
+    d0 = np.linalg.norm(pos[:, 0, None, :] - truth[0][None], axis=2)
+    d0 = np.where(np.isnan(d0), np.inf, d0)
+    nearest = d0.argmin(axis=1)
+    good = d0[np.arange(len(pts)), nearest] < 1.0
+    assert len(set(nearest[good])) >= 0.8 * truth.shape[1]
+    err = np.concatenate([np.linalg.norm(pos[i] - truth[:, nearest[i]], axis=1) for i in np.flatnonzero(good)])
+    err = err[np.isfinite(err)]
+    assert np.sqrt(np.mean(err ** 2)) < 1.5
+    c3d = read_c3d(tmp_path / "out.c3d")
+    assert c3d.positions.shape[:2] == (12, len(p.points))
