@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .errors import CaraError
+from .errors import CaraError, read_bytes
 
 
 def parse_label_text(text: str) -> list[str]:
@@ -31,12 +31,7 @@ def read_label_file(path: str | Path) -> list[str]:
         When the file is missing, unreadable or not text.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise CaraError("no such file", path) from None
-    except OSError as e:
-        raise CaraError(f"cannot read: {e.strerror}", path) from None
+    data = read_bytes(path)
     if b"\0" in data:
         raise CaraError("not a label text file (binary data)", path)
     try:

@@ -14,7 +14,7 @@ import numpy as np
 from lxml import etree
 
 from ..core.brim import Brim
-from ..core.errors import CaraError
+from ..core.errors import CaraError, read_bytes
 
 _SVG_NS = "http://www.w3.org/2000/svg"
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -78,12 +78,7 @@ def read_brim_svg(path: str | Path) -> Brim:
         For a missing file, malformed XML, a bad transform or fewer than 4 circles.
     """
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise CaraError("no such file", path) from None
-    except OSError as e:
-        raise CaraError(f"cannot read: {e.strerror}", path) from None
+    data = read_bytes(path)
     try:
         root = etree.fromstring(data, etree.XMLParser(resolve_entities=False, no_network=True, huge_tree=False))
     except etree.XMLSyntaxError as e:

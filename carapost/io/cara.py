@@ -23,6 +23,7 @@ file intact.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import struct
@@ -109,10 +110,9 @@ class _ArrayWriter:
         sync = getattr(os, "fdatasync", os.fsync)
 
         def run():
-            try:
+            # An error here is not lost: the final fsync of the save reports it.
+            with contextlib.suppress(OSError):
                 sync(fd)
-            except OSError:
-                pass  # the final fsync reports real errors
 
         self._flusher = threading.Thread(target=run, daemon=True)
         self._flusher.start()

@@ -20,7 +20,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..core.errors import CaraError
-from .pico import DEFAULT_FRAME_RATE, PicoReader, av_frame_to_grey, take_and_channel
+from .pico import DEFAULT_FRAME_RATE, PicoReader, av_frame_to_grey, decode_runs, take_and_channel
 
 log = logging.getLogger(__name__)
 
@@ -358,20 +358,13 @@ class VideoSource(FrameSource):
         raise CaraError(f"frame {index} cannot be decoded", self.path)
 
     def read_range(self, start: int, stop: int) -> Iterator[tuple[int, np.ndarray]]:
-        start, stop = max(0, int(start)), min(int(stop), self.frame_count)
-        nxt = start
-        while nxt < stop:
+        def decode(nxt):
             with self._lock:
                 if self._container is None:
                     raise CaraError("the file is closed", self.path)
-                got = self._decode_from(nxt)
-            if not got:
-                return
-            for idx, img in got:
-                if idx >= stop:
-                    return
-                yield idx, img
-            nxt = got[-1][0] + 1
+                return self._decode_from(nxt)
+
+        return decode_runs(decode, start, stop, self.frame_count)
 
     def close(self) -> None:
         with self._lock:

@@ -755,20 +755,13 @@ class PicoReader:
             Index and grey image of each frame that can be decoded, in order;
             damaged frames are left out (:meth:`read` says why).
         """
-        start, stop = max(0, int(start)), min(int(stop), self.frame_count)
-        nxt = start
-        while nxt < stop:
+        def decode(nxt):
             with self._lock:
                 if self._closed:
                     raise CaraError("the file is closed", self.path)
-                got = self._decode_from(nxt)
-            if not got:
-                return
-            for idx, img in got:
-                if idx >= stop:
-                    return
-                yield idx, img
-            nxt = got[-1][0] + 1
+                return self._decode_from(nxt)
+
+        return decode_runs(decode, start, stop, self.frame_count)
 
     def verify(self) -> list[int]:
         """Check every frame's TS packets and PES header (no decoding).
@@ -820,6 +813,25 @@ class PicoReader:
 # --------------------------------------------------------------------------------------------------
 
 _TIMECODE = re.compile(r"^\d{1,2}:\d{2}:\d{2}[:;.]\d{2,3}$")
+
+
+def decode_runs(decode_from, start: int, stop: int, frame_count: int) -> Iterator[tuple[int, np.ndarray]]:
+    """Frames ``start .. stop-1`` from a decoder that returns runs of ``(index, image)`` from a frame on.
+
+    ``decode_from(k)`` decodes from the GOP holding ``k`` and returns the frames
+    from ``k`` it produced; each call continues where the last run ended.
+    """
+    start, stop = max(0, int(start)), min(int(stop), frame_count)
+    nxt = start
+    while nxt < stop:
+        got = decode_from(nxt)
+        if not got:
+            return
+        for idx, img in got:
+            if idx >= stop:
+                return
+            yield idx, img
+        nxt = got[-1][0] + 1
 
 
 def take_and_channel(path: str | os.PathLike) -> tuple[str, int] | None:
