@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from carapost.core.errors import CaraError
+from carapost.core.errors import CaraError, read_bytes
 from carapost.io.atomic import atomic_write
 
 __all__ = ["C3DData", "read_c3d", "c3d_info", "write_c3d", "PROCESSOR_INTEL", "PROCESSOR_DEC", "PROCESSOR_MIPS"]
@@ -374,21 +374,10 @@ def _parse_parameters(buf: bytes, start: int, end: int, codec: _Codec, warnings:
 
 # --------------------------------------------------------------------------- reader
 
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise CaraError("no such file", path) from None
-    except IsADirectoryError:
-        raise CaraError("is a folder, not a C3D file", path) from None
-    except OSError as e:
-        raise CaraError(f"cannot read: {e.strerror or e}", path) from None
-
-
 def _parse(path: str | os.PathLike):
     """Header, parameters and the decoded data section of a C3D file."""
     path = Path(path)
-    buf = _read_bytes(path)
+    buf = read_bytes(path)
     warnings: list[str] = []
     if len(buf) < BLOCK:
         raise CaraError(f"not a C3D file: {len(buf)} bytes, shorter than the 512-byte header", path)

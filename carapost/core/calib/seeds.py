@@ -69,6 +69,15 @@ def apply_seeds(project, seeds: dict, parts=("brim", "face")) -> Command:
             raise CaraError(f"seeds {taken[(s, i)]} and {what} take the same detection {i} in channel {s}")
         taken[(s, i)] = what
 
+    def resolve(entry, what) -> dict[int, int]:
+        """Each click of a seed -> the detection it takes, per sensor."""
+        dets = {}
+        for key, uv in entry.get("uv", {}).items():
+            s = _sensor(project, key)
+            dets[s] = nearest_detection(project, s, frame, uv, what)
+            claim(s, dets[s], what)
+        return dets
+
     if "brim" in parts:
         for k, e in enumerate(seeds.get("brim", [])):
             idx = int(e["index"])
@@ -76,22 +85,12 @@ def apply_seeds(project, seeds: dict, parts=("brim", "face")) -> Command:
             if project.brim is None or not 0 <= idx < len(project.brim):
                 n = 0 if project.brim is None else len(project.brim)
                 raise CaraError(f"seed {what}: the calibration brim has {n} markers")
-            dets = {}
-            for key, uv in e.get("uv", {}).items():
-                s = _sensor(project, key)
-                dets[s] = nearest_detection(project, s, frame, uv, what)
-                claim(s, dets[s], what)
-            brim_entries.append((idx, dets))
+            brim_entries.append((idx, resolve(e, what)))
     if "face" in parts:
         for k, e in enumerate(seeds.get("face", [])):
             label = e.get("label") or None
             what = f"face[{k}]" + (f" ({label})" if label else "")
-            dets = {}
-            for key, uv in e.get("uv", {}).items():
-                s = _sensor(project, key)
-                dets[s] = nearest_detection(project, s, frame, uv, what)
-                claim(s, dets[s], what)
-            face_entries.append((label, dets))
+            face_entries.append((label, resolve(e, what)))
 
     done: list[Command] = []
     try:
