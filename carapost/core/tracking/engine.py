@@ -25,6 +25,32 @@ BRIM_REJECT_PX = 3.0
 #: Pose iterations for the brim solve and for the frame's camera refinement.
 BRIM_ITERATIONS = 2
 BUNDLE_ITERATIONS = 1
+#: Held-out view errors above this many robust standard deviations of the frame's are mismatches...
+HELD_OUT_SIGMAS = 8.0
+#: ...but never below this (px), so that a frame of perfect data does not reject sub-pixel noise.
+HELD_OUT_FLOOR_PX = 1.0
+
+
+def held_out_limit(errors: np.ndarray, max_error: float) -> float:
+    """The limit on a held-out view's error (px) on one frame.
+
+    A stray blob within Max Allowed 2D Projection Error of a hidden marker's
+    projection bends a 3-view point by millimetres while adding only a pixel or
+    two of residual; the frame's own held-out errors (mostly good views) tell how
+    far a good view lands, so a view far outside that spread is rejected even
+    below the user's limit, which stays the upper bound.
+
+    Parameters
+    ----------
+    errors : ndarray
+        Held-out reprojection errors (px) of the worst view of each 3+-view point.
+    max_error : float
+        Max Allowed 2D Projection Error.
+    """
+    if len(errors) < 8:
+        return float(max_error)
+    sigma = 1.4826 * float(np.median(errors))
+    return float(min(max_error, max(HELD_OUT_FLOOR_PX, HELD_OUT_SIGMAS * sigma)))
 
 
 @dataclass
@@ -308,7 +334,8 @@ class FrameTracker:
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
         if p.remove_bad_3d_points and np.any(measured):
-            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured)
+            back = lost & (valid.sum(1) >= 3)
+            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back)
             valid = src != SRC_NONE
         # 8. Single-sensor tracking of points seen by one sensor only.
         status = np.where(measured, ST_RECONSTRUCTED, ST_NONE).astype(np.uint8)
@@ -398,12 +425,22 @@ class FrameTracker:
         # A wrong view of a 3+-view point shares its error with the others; held out, it shows in full.
         rows = np.flatnonzero(valid.sum(1) >= 3)
         if len(rows):
-            worst = np.argmax(np.where(valid[rows], err[rows], -1.0), axis=1)
-            v = valid[rows].copy()
-            v[np.arange(len(rows)), worst] = False
-            Xo = triangulate(rig, uv_c[rows], v)
-            e = np.linalg.norm(rig.project(Xo)[np.arange(len(rows)), worst] - uv_c[rows, worst], axis=1)
-            bad = e > self.p.max_allowed_2d_projection_error
+            # Hold out each view in turn: the wrong one is the view the others agree least with
+            # (not the one with the largest residual, which a wrong view may push onto a good one).
+            held = np.full((len(rows), self.S), -1.0)
+            Xs = np.full((len(rows), self.S, 3), np.nan)
+            for s in range(self.S):
+                has = np.flatnonzero(valid[rows, s])
+                if len(has) == 0:
+                    continue
+                v = valid[rows[has]].copy()
+                v[:, s] = False
+                Xs[has, s] = triangulate(rig, uv_c[rows[has]], v)
+                held[has, s] = np.linalg.norm(rig.project(Xs[has, s])[:, s] - uv_c[rows[has], s], axis=1)
+            worst = np.argmax(held, axis=1)
+            e = held[np.arange(len(rows)), worst]
+            Xo = Xs[np.arange(len(rows)), worst]
+            bad = e > held_out_limit(e, self.p.max_allowed_2d_projection_error)
             if np.any(bad):
                 b, s = rows[bad], worst[bad]
                 valid[b, s] = False
@@ -413,9 +450,14 @@ class FrameTracker:
                 err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
         return X, err
 
-    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured):
-        """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction."""
-        lim = float(self.p.max_allowed_3d_point_error)
+    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back):
+        """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction.
+
+        ``back`` rows (lost on the previous frame, now seen by 3+ agreeing cameras) get twice the
+        limit: their neighbour offsets date from before they were lost, so the prediction is what
+        is stale, not the point.
+        """
+        lim = np.where(back, 2.0, 1.0) * float(self.p.max_allowed_3d_point_error)
         pred, _ = elastic.predict(X, measured, self.nb, self.off)
         dev = np.linalg.norm(X - pred, axis=1)
         bad = np.flatnonzero(measured & np.isfinite(dev) & (dev > lim))
@@ -430,7 +472,7 @@ class FrameTracker:
                     Xi = triangulate(rig, uv_c[i:i + 1], v[None])[0]
                     e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
                     d = np.linalg.norm(Xi - pred[i])
-                    if d <= lim and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:
+                    if d <= lim[i] and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:
                         best, best_d = (s, Xi, e), d
             if best is not None:
                 s, Xi, e = best

@@ -23,8 +23,11 @@ def _smooth(rng, frames, dims, sigma):
     """Smooth unit-ish noise (Gaussian-filtered white noise)."""
     from scipy.ndimage import gaussian_filter1d
 
-    x = gaussian_filter1d(rng.normal(size=(frames + 60, dims)), sigma, axis=0)[30:30 + frames]
-    return x / (x.std(axis=0, keepdims=True) + 1e-12)
+    x = gaussian_filter1d(rng.normal(size=(frames + 6 * int(sigma), dims)), sigma, axis=0)
+    x = x[3 * int(sigma):3 * int(sigma) + frames]
+    # Scale by the filter's theoretical output std, not the sample's: over a take shorter than a few
+    # sigma the sample std is tiny and dividing by it blew slow drift up into huge jumps.
+    return x * np.sqrt(2.0 * np.sqrt(np.pi) * sigma)
 
 
 def _pulses(rng, frames, count, attack, hold):
@@ -44,7 +47,8 @@ def _pulses(rng, frames, count, attack, hold):
 
 def make_take(markers: int = 35, frames: int = 300, seed: int = 0, noise: float = 0.05, false_dets: int = 6,
               jaw_mm: float = 14.0, jaw_frames: int = 5, blinks: int = 4, occlusion_rate: float = 0.01,
-              hidden_markers: int = 3, slips: int = 2, head_mm: float = 2.0) -> Scene:
+              hidden_markers: int = 3, slips: int = 2, head_mm: float = 2.0, rig_move: tuple = (0.0, 0.0),
+              motion_seed: int | None = None) -> Scene:
     """Build a moving :class:`Scene` (``scene.extras`` holds ``sizes`` and the event tracks).
 
     Parameters
@@ -63,11 +67,25 @@ def make_take(markers: int = 35, frames: int = 300, seed: int = 0, noise: float 
         Rig slips: the head jumps 1.5 mm inside the helmet over 3 frames.
     head_mm
         Amplitude of the slow head motion.
+    rig_move
+        ``(mm, degrees)``: every camera moved rigidly, relative to the face and brim, by a shift and a
+        rotation about the face's centre in random directions (the helmet put on again: a second take
+        of the same face for Initialize from ROM).
+    motion_seed
+        Seed of the motion, events and detection noise (default from ``seed``); the face and rig
+        layout always come from ``seed``.
     """
     base = make_scene(markers, frames=1, seed=seed, noise=noise, false_dets=false_dets)
-    rng = np.random.default_rng(seed + 1000)
+    rng = np.random.default_rng(seed + 1000 if motion_seed is None else motion_seed)
     S = 4
     cams0 = base.cameras[0]
+    if rig_move[0] or rig_move[1]:
+        mrng = np.random.default_rng(seed + 2000)
+        axis, shift = mrng.normal(size=3), mrng.normal(size=3)
+        dR = Rotation.from_rotvec(np.radians(rig_move[1]) * axis / np.linalg.norm(axis)).as_matrix()
+        c = base.face[0].mean(axis=0)
+        d = rig_move[0] * shift / np.linalg.norm(shift)
+        cams0 = [cam.with_pose(cam.rotation @ dR.T, dR @ (cam.position - c) + c + d) for cam in cams0]
     brim = base.brim
     # Rest positions in rig coordinates (world = (Xr - T) @ R).
     Xr0 = base.face[0] @ BRIM_RIG_R.T + BRIM_RIG_T
@@ -82,7 +100,7 @@ def make_take(markers: int = 35, frames: int = 300, seed: int = 0, noise: float 
         step *= 1.5 / np.linalg.norm(step)
         ramp = np.clip((np.arange(frames) - s0) / 3.0, 0, 1)
         trans += ramp[:, None] * step
-    rot[0] = 0
+    rot -= rot[0]
     trans -= trans[0]
     jaw = _pulses(rng, frames, max(1, frames // 100), jaw_frames, 15)
     w_jaw = np.clip((Xr0[:, 1] - 30.0) / 35.0, 0, 1) ** 1.2
