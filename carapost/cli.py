@@ -78,6 +78,10 @@ def _cmd_export(args) -> int:
         from .io.export_c3d import export_c3d
 
         export_c3d(project, args.out)
+    elif args.format == "fbx":
+        from .io.export_fbx import write_fbx
+
+        write_fbx(project, args.out)
     elif args.format == "xcp":
         from .io.export_xcp import export_xcp
 
@@ -109,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("export", help="the File menu's exports")
-    p.add_argument("format", choices=["c3d", "xcp"])
+    p.add_argument("format", choices=["c3d", "fbx", "xcp"])
     p.add_argument("project", help="a .cara project")
     p.add_argument("out")
     p.add_argument("--frame", type=int, help="frame of the cameras for xcp (default: start of the active range)")
@@ -121,12 +125,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--only", action="append", help="run only benchmarks whose module name contains this")
     p.set_defaults(func=_cmd_bench)
 
+    from .batch_cli import add_batch_command
     from .blob_cli import add_blob_commands
     from .fillgaps_cli import add_fill_gaps_command
     from .process_cli import add_process_command
     from .sample.cli import add_parser as add_sample_command
     from .gui.cli_entry import add_gui_commands  # loads no Qt until `gui` or `shortcuts` runs
 
+    add_batch_command(sub)
     add_blob_commands(sub)
     add_fill_gaps_command(sub)
     add_process_command(sub)

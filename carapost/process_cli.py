@@ -56,8 +56,6 @@ def process_main(args) -> int:
     from .io.imports import import_xcp
     from .io.take import project_from_input
 
-    if args.fbx:
-        raise CaraError("FBX export is not available yet (it lands with the exports issue); use --c3d")
     out = Path(args.out)
     if not out.absolute().parent.is_dir():
         raise CaraError("the output folder does not exist", out.absolute().parent)
@@ -117,4 +115,9 @@ def process_main(args) -> int:
 
         export_c3d(project, args.c3d)
         print(f"wrote {args.c3d}")
+    if args.fbx:
+        from .io.export_fbx import write_fbx
+
+        write_fbx(project, args.fbx)
+        print(f"wrote {args.fbx}")
     return 0

@@ -65,3 +65,65 @@ def make_project(frames: int = 50, sensors: int = 4, points: int = 6, seed: int 
                                distortion=np.array([1e-8, 1e-15]), rotation=R, position=centre))
         p.rig = CameraRig(cams, frames)
     return p
+
+
+def make_export_project():
+    """(project, a, b, c) for export tests: 20 frames at 60 fps, three points.
+
+    ``a`` "Nose_Tip": every frame, sensors 0, 2, 3, interpolated on frame 5 and
+    single-sensor (sensor 1) on frame 6; ``b`` unlabelled, frames 3-7 only; ``c``
+    "Brim_0", a brim point on every frame.
+    """
+    from carapost.core.points import BRIM, SRC_DETECTION, SRC_NONE, ST_INTERPOLATED, ST_RECONSTRUCTED, ST_SINGLE
+
+    p = make_project(frames=20, points=3)
+    a, b, c = p.points.values()
+    for pt in (a, b, c):
+        pt.clear_range(0, 20)
+    a.label, b.label, c.label = "Nose_Tip", "", "Brim_0"
+    c.kind = BRIM
+    a.pos[:] = np.array([10.0, 20.0, 30.0]) + np.arange(20)[:, None]
+    a.status[:] = ST_RECONSTRUCTED
+    a.residual[:] = 0.5
+    a.src[:, [0, 2, 3]] = SRC_DETECTION
+    a.status[5] = ST_INTERPOLATED
+    a.src[5] = SRC_NONE
+    a.status[6] = ST_SINGLE
+    a.src[6] = SRC_NONE
+    a.src[6, 1] = SRC_DETECTION
+    b.pos[3:8] = [1.25, -2.5, 3.75]
+    b.status[3:8] = ST_RECONSTRUCTED
+    b.residual[3:8] = 0.25
+    b.src[3:8, :2] = SRC_DETECTION
+    c.pos[:] = [-80, 5, 0]
+    c.status[:] = ST_RECONSTRUCTED
+    c.src[:] = SRC_DETECTION
+    c.residual[:] = 0.1
+    return p, a, b, c
+
+
+#: A rendered take small enough for end-to-end tests whose seeds the pipeline resolves today
+#: (blob.black_threshold=0.1; see the README's quick start): 35 markers, 4 frames, seed 3.
+SMALL_TAKE = dict(markers=35, frames=4, seed=3)
+SMALL_TAKE_SET = {"blob.black_threshold": 0.1}
+
+
+def write_small_take(folder, take: str = "Sample") -> Path:
+    """Render :data:`SMALL_TAKE` into ``folder`` (``<take>_0..3.pico`` and its truth files); returns the folder."""
+    from carapost.sample import write_sample
+
+    write_sample(folder, take=take, workers=1, **SMALL_TAKE)
+    return Path(folder)
+
+
+def copy_take(src, dst, take: str, extra=("calibration.xcp", "brim.svg", "seeds.json")) -> Path:
+    """Copy the take of folder ``src`` into ``dst`` as ``<take>_0..3.pico`` with the files ``extra``; returns ``dst``."""
+    import shutil
+
+    src, dst = Path(src), Path(dst)
+    dst.mkdir(parents=True, exist_ok=True)
+    for f in sorted(src.glob("*_[0-9].pico")):
+        shutil.copy2(f, dst / f"{take}_{f.stem.rsplit('_', 1)[1]}.pico")
+    for name in extra:
+        shutil.copy2(src / name, dst / name)
+    return dst

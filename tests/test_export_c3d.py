@@ -2,9 +2,8 @@
 import c3d as c3dpkg
 import numpy as np
 
-from carapost.core.points import BRIM, SRC_DETECTION, SRC_NONE, ST_INTERPOLATED, ST_RECONSTRUCTED, ST_SINGLE
 from carapost.io.export_c3d import export_c3d
-from support import make_project
+from support import make_export_project
 
 
 def _read(path):
@@ -16,29 +15,7 @@ def _read(path):
 
 
 def test_export_labels_positions_residuals_masks(tmp_path):
-    p = make_project(frames=20, points=3)
-    a, b, c = p.points.values()
-    for pt in (a, b, c):
-        pt.clear_range(0, 20)
-    a.label, b.label, c.label = "Nose_Tip", "", "Brim_0"
-    c.kind = BRIM
-    a.pos[:] = np.array([10.0, 20.0, 30.0]) + np.arange(20)[:, None]
-    a.status[:] = ST_RECONSTRUCTED
-    a.residual[:] = 0.5
-    a.src[:, [0, 2, 3]] = SRC_DETECTION
-    a.status[5] = ST_INTERPOLATED
-    a.src[5] = SRC_NONE
-    a.status[6] = ST_SINGLE
-    a.src[6] = SRC_NONE
-    a.src[6, 1] = SRC_DETECTION
-    b.pos[3:8] = [1.25, -2.5, 3.75]
-    b.status[3:8] = ST_RECONSTRUCTED
-    b.residual[3:8] = 0.25
-    b.src[3:8, :2] = SRC_DETECTION
-    c.pos[:] = [-80, 5, 0]
-    c.status[:] = ST_RECONSTRUCTED
-    c.src[:] = SRC_DETECTION
-    c.residual[:] = 0.1
+    p, a, b, c = make_export_project()
     out = tmp_path / "t.c3d"
     export_c3d(p, out)
     labels, fr = _read(out)

@@ -18,7 +18,8 @@ def test_process_a_sample_take(tmp_path):
     rc = main([
         "process", str(tmp_path / "Sample_0.pico"), "--xcp", str(tmp_path / "calibration.xcp"),
         "--brim-svg", str(tmp_path / "brim.svg"), "--seeds", str(tmp_path / "seeds.json"),
-        "-o", str(out), "--c3d", str(tmp_path / "out.c3d"), "--set", "blob.black_threshold=0.1"])
+        "-o", str(out), "--c3d", str(tmp_path / "out.c3d"),
+        "--fbx", str(tmp_path / "out.fbx"), "--set", "blob.black_threshold=0.1"])
     assert rc == 0
     truth = np.load(tmp_path / "truth.npz")["face_xyz"]          # (F, M, 3)
     p = load_project(out)
@@ -34,3 +35,5 @@ def test_process_a_sample_take(tmp_path):
     assert np.sqrt(np.mean(err ** 2)) < 1.5
     c3d = read_c3d(tmp_path / "out.c3d")
     assert c3d.positions.shape[:2] == (12, len(p.points))
+    fbx = (tmp_path / "out.fbx").read_bytes()
+    assert fbx.startswith(b"Kaydara FBX Binary  \x00") and all(q.label.encode() in fbx for q in pts if q.label)

@@ -22,7 +22,7 @@ from ..core.points import BRIM, FACE
 from ..core.progress import Progress
 from ..core.project import Project
 
-__all__ = ["CaraProcess", "CaraExport", "Pico", "DebugServices", "CaraError"]
+__all__ = ["CaraProcess", "CaraExport", "Pico", "DebugServices", "CaraError", "property_table", "run_script"]
 
 log = logging.getLogger("carapost")
 
@@ -106,17 +106,20 @@ class CaraProcess:
 
     # ---------------------------------------------------------- processing
     def detect_blobs(self, sensors: list[int] | None = None, start: int | None = None, end: int | None = None,
-                     progress: Progress | None = None) -> bool:
+                     progress: Progress | None = None, workers: int | None = None) -> bool:
         """Detect Blobs over a range (default: the active range) of some sensors (default: all).
 
         ``detect_blobs()`` or ``detect_blobs(sensors, start, end)`` as in PyCara.
+        ``workers`` is the number of detection processes (default: every core;
+        1 detects in this process, as a batch worker should).
         """
         from ..core.blob_ops import detect_blobs_range
 
         a, b = self.project.active_range
         start = a if start is None else start
         end = b if end is None else end
-        self.document.run(detect_blobs_range(self.project, start, end, sensors=sensors, progress=progress))
+        self.document.run(detect_blobs_range(self.project, start, end, sensors=sensors, progress=progress,
+                                             workers=workers))
         return True
 
     def apply_seeds(self, seeds: dict | str | Path) -> None:
@@ -128,6 +131,39 @@ class CaraProcess:
         if not isinstance(seeds, dict):
             seeds = json.loads(Path(seeds).read_text())
         self.document.run(apply_seeds(self.project, seeds))
+
+    def initialize_from_seeds(self, seeds: dict | str | Path) -> int:
+        """Initialise the take from a person's clicks, as ``carapost process`` does.
+
+        Attaches the brim seeds, runs Solve Calibration Brim, merges the face
+        seeds, then Bundle Current Frame and Initialize 3D, all on the seeds'
+        frame.  Needs detections on that frame, cameras (an imported XCP) and a
+        calibration brim (:meth:`set_brim`).  A failing step undoes the earlier
+        ones, so the project is left as it was.
+
+        Parameters
+        ----------
+        seeds : dict or path
+            A ``seeds.json`` (CONTRACT section 3) or its dict.
+
+        Returns
+        -------
+        int
+            The frame initialised (the seeds' ``frame``): track from there.
+        """
+        import json
+
+        from ..core.pipeline import process_to_init3d
+
+        if not isinstance(seeds, dict):
+            from ..core.errors import read_bytes
+
+            try:
+                seeds = json.loads(read_bytes(seeds))
+            except json.JSONDecodeError as e:
+                raise CaraError(f"not valid JSON: {e}", seeds) from None
+        process_to_init3d(self.project, seeds, None, log=log.info, stack=self.document.stack)
+        return self.document.set_frame(int(seeds.get("frame", 0)))
 
     def solve_calibration_brim(self, frame: int | None = None) -> None:
         """Process > Solve Calibration Brim [Manual] on ``frame`` (default: the current frame)."""
@@ -160,6 +196,59 @@ class CaraProcess:
         self.document.run(cmd)
         return report
 
+    # ------------------------------------------------------------------ ROM
+    def load_rom(self, path: str | Path) -> None:
+        """Process > Load ROM: the ``.cara`` of a ROM take of the same actor (its path is saved with the project)."""
+        from ..core.rom_ops import load_rom
+
+        self.document.run(load_rom(self.project, path))
+
+    def initialize_from_rom(self, frame: int | None = None, brim_only: bool = False) -> dict:
+        """Process > Initialize from ROM (``brim_only``: [Brim Only]) on ``frame`` (default: the current frame).
+
+        Uses the Initialize From ROM Parameters (``initialize_from_rom.*``).  Returns the
+        report: ``brim_markers`` matched, ``points`` created, ``labelled``, ``rms_px``.
+        Raises CaraError when no ROM is loaded.
+        """
+        from ..core.rom_ops import initialize_from_rom
+        from ..io.frames import TakeFrames
+
+        images = TakeFrames(self.project) if any(s.media.path and not s.media.missing
+                                                 for s in self.project.sensors) else None
+        try:
+            cmd = initialize_from_rom(self.project, self._frame(frame), brim_only=brim_only, images=images)
+        finally:
+            if images is not None:
+                images.close()
+        self.document.run(cmd)
+        log.info(cmd.summary)
+        return cmd.report
+
+    def add_rom_correspondence(self, rom_point: int, sensor: int, detection: int, frame: int | None = None) -> None:
+        """ROM Tools > Add 2D To ROM Correspondence: ROM point ``rom_point`` (its id) is ``detection`` of ``sensor``."""
+        from ..core.rom_ops import add_2d_to_rom_correspondence
+
+        self.document.run(add_2d_to_rom_correspondence(self.project, rom_point,
+                                                       [(sensor, self._frame(frame), detection)]))
+
+    def clear_rom_correspondences(self) -> None:
+        """ROM Tools > Clear 2D To ROM Correspondence."""
+        from ..core.rom_ops import clear_2d_to_rom_correspondences
+
+        self.document.run(clear_2d_to_rom_correspondences(self.project))
+
+    def solve_rom_camera(self, sensor: int | None = None) -> None:
+        """ROM Tools > Solve ROM Camera From Correspondences (4+ in one channel; the ROM's rig follows it)."""
+        from ..core.rom_ops import solve_rom_camera_from_correspondences
+
+        self.document.run(solve_rom_camera_from_correspondences(self.project, sensor))
+
+    def solve_rom_face_alignment(self, frame: int | None = None) -> None:
+        """ROM Tools > Solve ROM Face Alignment From Correspondences (3+ face point correspondences)."""
+        from ..core.rom_ops import solve_rom_face_alignment_from_correspondences
+
+        self.document.run(solve_rom_face_alignment_from_correspondences(self.project, self._frame(frame)))
+
     def track(self, frame: int | None = None, backwards: bool = False, single_frame: bool = False,
               point_ids: list[int] | None = None, progress: Progress | None = None) -> None:
         """Track Forwards/Backwards [Sequence] (or [Single Frame]) from ``frame``."""
@@ -182,6 +271,49 @@ class CaraProcess:
 
         self.document.run(interpolate_gaps(self.project, point_ids))
 
+    # ------------------------------------------------------- stabilisation
+    def stabilize(self, manual_point_ids: list | None = None, base_frame: int | None = None) -> dict:
+        """Process > Stabilize Data [Manual] over the active range; returns the error figures (mm).
+
+        ``manual_point_ids``: at least three gap-free points (ids or labels) that
+        expressions do not move; default the selected points.  ``base_frame``:
+        default the current frame.  The raw positions are kept; read the result
+        with :meth:`CaraExport.point_3d_stabilized` or
+        :func:`carapost.core.stabilize_ops.stabilized_positions`.
+        """
+        from ..core.stabilize_ops import resolve_points, stabilize_manual
+
+        ids = resolve_points(self.project, manual_point_ids) if manual_point_ids else self.document.selection.points
+        return self._logged(stabilize_manual(self.project, ids, self._frame(base_frame)))
+
+    def stabilize_assisted(self, point_ids: list | None = None, base_frame: int | None = None,
+                           progress: Progress | None = None) -> dict:
+        """Process > Stabilize Data [Assisted] with the Stabilization Parameters; returns the error figures.
+
+        ``point_ids`` (ids or labels; default the selected points, or every
+        point when none is selected) is the starting set; the most stable points
+        of each frame are found from there.
+        """
+        from ..core.stabilize_ops import resolve_points, stabilize_assisted
+
+        ids = resolve_points(self.project, point_ids) if point_ids else self.document.selection.points
+        return self._logged(stabilize_assisted(self.project, ids, self._frame(base_frame), progress=progress))
+
+    def align_data(self, p0, p1, p2, frame: int | None = None) -> None:
+        """Process > Align Data: ``p0`` the origin, ``p1`` on +X, ``p2`` in the XY plane (+Y side).
+
+        Points are ids or labels, placed as they are on ``frame`` (default the
+        current frame); applied on top of the stabilisation, raw data unchanged.
+        """
+        from ..core.stabilize_ops import align_data, resolve_points
+
+        self._logged(align_data(self.project, resolve_points(self.project, [p0, p1, p2]), self._frame(frame)))
+
+    def _logged(self, cmd) -> dict:
+        self.document.run(cmd)
+        log.info(cmd.summary)
+        return dict(cmd.report)
+
     def undo(self) -> None:
         """Edit > Undo."""
         self.document.undo()
@@ -202,6 +334,18 @@ class CaraProcess:
         from ..io.export_c3d import export_c3d
 
         export_c3d(self.project, path)
+
+    def export_fbx(self, path: str | Path, frame_range: tuple[int, int] | None = None) -> None:
+        """File > Export FBX: one animated Null per point (``frame_range``: first, last frame; default per the Export properties)."""
+        from ..io.export_fbx import write_fbx
+
+        write_fbx(self.project, path, frame_range)
+
+    def export_xcp(self, path: str | Path, frame: int | None = None) -> None:
+        """File > Export XCP: the cameras of ``frame`` (default: the start of the active range)."""
+        from ..io.export_xcp import export_xcp
+
+        export_xcp(self.project, path, self.project.active_range[0] if frame is None else int(frame))
 
     def _frame(self, frame: int | None) -> int:
         return self.document.current_frame if frame is None else int(frame)
@@ -234,6 +378,25 @@ class CaraExport:
     def sensor_count(self) -> int:
         return self.project.sensor_count
 
+    @property
+    def take_name(self) -> str:
+        """The take's name (``Example`` for ``Example_0.pico``)."""
+        return self.project.name
+
+    @property
+    def timecode_start(self) -> str:
+        """Timecode ``HH:MM:SS:FF`` of frame 0."""
+        return self.project.timecode_start
+
+    def properties(self) -> dict[str, Any]:
+        """Every property of the project, ``group.name -> value`` (see :func:`property_table`)."""
+        return self.project.properties.to_dict()
+
+    def image_size(self, sensor: int) -> tuple[int, int]:
+        """``(width, height)`` in pixels of a sensor's raw images (the frame of 2D tracks)."""
+        info = self.project.sensors[sensor]
+        return info.width, info.height
+
     def labels(self) -> list[str]:
         """The label list (Labelling pane order)."""
         return list(self.project.labels)
@@ -253,6 +416,20 @@ class CaraExport:
         out = np.asarray(p.pos, float).copy()
         out[p.status == 0] = np.nan
         return out
+
+    def point_3d_stabilized(self, pid: int) -> np.ndarray:
+        """``(F, 3)`` stabilised (and aligned) positions in mm; NaN where absent or not stabilised.
+
+        The raw positions (:meth:`point_3d`) when the project is not stabilised.
+        """
+        from ..core.stabilize_ops import stabilized_positions
+
+        return stabilized_positions(self.project, slice(None), [pid])[:, 0]
+
+    def stabilization_transforms(self) -> np.ndarray | None:
+        """``(F, 3, 4)`` per-frame raw-to-stabilised transforms ``[R | t]`` (NaN: not stabilised), or None."""
+        s = self.project.stabilization
+        return None if s is None else np.array(s.transforms, float)
 
     def point_status(self, pid: int) -> np.ndarray:
         """``(F,)`` status: 0 none, 1 reconstructed, 2 single-sensor, 3 interpolated."""
@@ -317,6 +494,51 @@ class CaraExport:
             raise CaraError(f"sensor {sensor} has no .pico media with burnt-in frame numbers")
         with PicoReader(media.path) as r:
             return np.asarray(r.frame_numbers)
+
+
+def run_script(main) -> None:
+    """Run a script's ``main()`` as the ``carapost`` command runs its subcommands, then exit.
+
+    The exit status is what ``main`` returns (``None`` is 0).  A
+    :class:`CaraError` (a bad or missing input) becomes one line on stderr,
+    ``<script>: error: <file>: <problem>``, and exit status 2, without a
+    traceback; Ctrl+C exits with 130; a closed pipe (``| head``) with 0.  The
+    guide's example scripts end with ``run_script(main)``.
+    """
+    import os
+    import sys
+
+    prog = Path(sys.argv[0]).stem or "script"
+    try:
+        code = int(main() or 0)
+    except CaraError as e:
+        print(f"{prog}: error: {e}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        code = 130
+    except BrokenPipeError:
+        # The reader has gone; point stdout at devnull so the interpreter's final flush is quiet.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        code = 0
+    sys.exit(code)
+
+
+def property_table() -> list[dict[str, Any]]:
+    """Every property the Properties pane shows, in its order, with the guide's defaults.
+
+    Returns
+    -------
+    list of dict
+        One per property: ``key`` (``group.name``, what :meth:`CaraProcess.set_property`
+        takes), ``group``, ``group_title``, ``title``, ``type`` (``bool``, ``int``,
+        ``float``, ``str``), ``default``, ``minimum``, ``maximum``, ``unit``, ``help``.
+    """
+    from ..core.properties import GROUPS, PROPERTY_TABLE
+
+    return [{"key": p.key, "group": p.group, "group_title": GROUPS[p.group], "title": p.title,
+             "type": p.type.__name__, "default": p.default, "minimum": p.minimum, "maximum": p.maximum,
+             "unit": p.unit, "help": p.help} for p in PROPERTY_TABLE]
 
 
 def timecode_to_frames(timecode: str, rate: float) -> int:

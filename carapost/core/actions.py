@@ -22,6 +22,14 @@ MENUS = ("File", "Edit", "View", "Process", "Help")
 
 #: The context menu of a camera view (guide: "2D context menus").
 CONTEXT_2D = "2D"
+#: The context menus of the 3D view, the Graph view and the Continuity chart.
+CONTEXT_3D = "3D"
+CONTEXT_GRAPH = "Graph"
+CONTEXT_CONTINUITY = "Continuity"
+#: Every view's context menu (their items are not in the menu bar).
+CONTEXT_MENUS = (CONTEXT_2D, CONTEXT_3D, CONTEXT_GRAPH, CONTEXT_CONTINUITY)
+#: The Tracker pane's buttons and the keyframe nudges: window shortcuts, not menu items.
+TRACKER_PANE = "Tracker pane"
 
 
 @dataclass(frozen=True)
@@ -33,8 +41,8 @@ class Action:
     id : str
         Stable identifier, e.g. ``"edit.merge"``.
     menu : str
-        Menu path, ``"Edit"`` or ``"View > Panels"``; :data:`CONTEXT_2D` for the
-        camera-view context menu.
+        Menu path, ``"Edit"`` or ``"View > Panels"``; one of :data:`CONTEXT_MENUS`
+        for a view's context menu.
     title : str
         The guide's menu text.
     shortcut : str
@@ -111,7 +119,8 @@ ACTIONS: tuple[Action, ...] = (
        "Write the cameras of the current frame to an .xcp file.", separator_before=True),
     _A("file.export_c3d", "File", "Export C3D", "", "files.export_c3d", "project",
        "Write the points to a .c3d file (see the Export properties)."),
-    _na("file.export_fbx", "File", "Export FBX", "FBX export"),
+    _A("file.export_fbx", "File", "Export FBX", "", "files.export_fbx", "project",
+       "Write the points to an .fbx file: one animated Null per point (see the Export properties)."),
     # Recent Files is a submenu of the last eight projects, rebuilt by the window.
     _A("file.clear_recent", "File", "Clear Recent Files", "", "files.clear_recent", "recent",
        "Empty the Recent Files list.", separator_before=True, while_busy=True),
@@ -153,7 +162,8 @@ ACTIONS: tuple[Action, ...] = (
        "Click in a camera view to put a keyframe of the selected point there.", arg="edit"),
     _A("edit.stop_point_edit", "Edit", "Stop Point Edit mode", "Shift+S", "edit.set_click_mode", "project",
        "Leave Add/Edit Target Track mode.", arg=""),
-    _na("edit.gaps_to_keys", "Edit", "Gaps To Keys", "the Target Tracker", 8),
+    _A("edit.gaps_to_keys", "Edit", "Gaps To Keys", "", "target.gaps_to_keys", "project",
+       "With a point selected, add keyframes on both sides of every gap in its tracking."),
     _A("edit.remove_unused_detections", "Edit", "Remove Unused Detections", "", "edit.remove_unused_detections",
        "project", "Delete every detection not attached to a point, on every frame."),
     _A("edit.remove_interpolated", "Edit", "Remove Interpolated 3D Points", "", "edit.remove_interpolated",
@@ -191,7 +201,9 @@ ACTIONS: tuple[Action, ...] = (
     _A("view.blob_preview", "View", "Toggle Blob Preview", "Ctrl+B", "views.toggle_display", "always",
        "Show the blobs Detect Blobs would find with the current Blob Parameters.", checkable=True,
        arg="blob_preview", while_busy=True),
-    _na("view.show_stabilized", "View", "Toggle Show Stabilized", "stabilisation", shortcut="Ctrl+Shift+S"),
+    _A("view.show_stabilized", "View", "Toggle Show Stabilized", "Ctrl+Shift+S", "stabilize.toggle_show", "project",
+       "Show the stabilised (and aligned) positions instead of the raw ones in the 3D view.", checkable=True,
+       while_busy=True),
     _A("view.go_to_frame", "View", "Go To Frame", "Ctrl+G", "navigate.go_to_frame", "project",
        "Go to a frame by number.", separator_before=True, while_busy=True),
     _A("view.go_start", "View", "Go to Start Frame", "Home", "navigate.go_start", "project",
@@ -251,16 +263,25 @@ ACTIONS: tuple[Action, ...] = (
        separator_before=True),
     _A("process.detect_blobs_frame", "Process", "Detect Blobs [Current Frame]", "", "process.detect_blobs",
        "project", "Find blobs on the current frame with the Blob Parameters.", arg="frame"),
-    _na("process.load_rom", "Process", "Load ROM", "ROM initialisation", separator_before=True),
-    _na("process.init_from_rom", "Process", "Initialize from ROM", "ROM initialisation"),
-    _na("process.init_from_rom_brim", "Process", "Initialize from ROM [Brim Only]", "ROM initialisation"),
-    _na("process.rom_timebar", "Process > ROM Tools", "Display ROM Timebar", "the ROM tools"),
-    _na("process.rom_add_2d", "Process > ROM Tools", "Add 2D To ROM Correspondence", "the ROM tools",
-        shortcut="Ctrl+L"),
-    _na("process.rom_clear_2d", "Process > ROM Tools", "Clear 2D To ROM Correspondence", "the ROM tools"),
-    _na("process.rom_solve_camera", "Process > ROM Tools", "Solve ROM Camera From Correspondences", "the ROM tools"),
-    _na("process.rom_solve_face", "Process > ROM Tools", "Solve ROM Face Alignment From Correspondences",
-        "the ROM tools"),
+    _A("process.load_rom", "Process", "Load ROM", "", "rom.load_rom", "project",
+       "Load the .cara of a ROM take of the same actor and marker set, to initialise this take from.",
+       separator_before=True),
+    _A("process.init_from_rom", "Process", "Initialize from ROM", "", "rom.initialize", "project",
+       "Initialise the current frame from the loaded ROM: cameras, brim, labelled face points and sticks "
+       "(see the Initialize From ROM Parameters).", arg="full"),
+    _A("process.init_from_rom_brim", "Process", "Initialize from ROM [Brim Only]", "", "rom.initialize", "project",
+       "Initialise the brim points and the cameras of the current frame from the loaded ROM.", arg="brim"),
+    _A("process.rom_timebar", "Process > ROM Tools", "Display ROM Timebar", "", "rom.show_timebar", "project",
+       "A timebar of the ROM take in its own window: it sets the ROM Frame Index."),
+    _A("process.rom_add_2d", "Process > ROM Tools", "Add 2D To ROM Correspondence", "Ctrl+L", "rom.add_correspondence",
+       "project", "The selected ROM point (click a pale blue ROM point) is the selected detection."),
+    _A("process.rom_clear_2d", "Process > ROM Tools", "Clear 2D To ROM Correspondence", "",
+       "rom.clear_correspondences", "project", "Forget every 2D to ROM correspondence."),
+    _A("process.rom_solve_camera", "Process > ROM Tools", "Solve ROM Camera From Correspondences", "",
+       "rom.solve_camera", "project",
+       "Solve the camera of the channel with 4+ correspondences; the ROM's rig follows it."),
+    _A("process.rom_solve_face", "Process > ROM Tools", "Solve ROM Face Alignment From Correspondences", "",
+       "rom.solve_face", "project", "Move the ROM face rigidly onto the face correspondences of every channel."),
     _A("process.brim_v20", "Process", "Initialize Default Calibration Brim [v2.0]", "", "process.default_brim",
        "project", "Use the v2.0 calibration brim.", arg="v2.0", separator_before=True),
     _A("process.brim_v11", "Process", "Initialize Default Calibration Brim [v1.1]", "", "process.default_brim",
@@ -286,9 +307,15 @@ ACTIONS: tuple[Action, ...] = (
        "project", "Track the selected (or all) points into the next frame and go there.", arg="forwards_frame"),
     _A("process.track_back_frame", "Process", "Track Backwards [Single Frame]", "", "process.track", "project",
        "Track the selected (or all) points into the previous frame and go there.", arg="backwards_frame"),
-    _na("process.stabilize_manual", "Process", "Stabilize Data [Manual]", "stabilisation", separator_before=True),
-    _na("process.stabilize_assisted", "Process", "Stabilize Data [Assisted]", "stabilisation"),
-    _na("process.align", "Process", "Align Data", "Align Data"),
+    _A("process.stabilize_manual", "Process", "Stabilize Data [Manual]", "", "stabilize.stabilize_manual", "project",
+       "Map the selected stable points (3 or more, gap-free) of every active-range frame onto the current frame.",
+       separator_before=True),
+    _A("process.stabilize_assisted", "Process", "Stabilize Data [Assisted]", "", "stabilize.stabilize_assisted",
+       "project", "Stabilise the active range onto the current frame from the selected points and the most stable "
+       "others (see the Stabilization properties; in the background)."),
+    _A("process.align", "Process", "Align Data", "", "stabilize.align", "project",
+       "Three selected points define the frame: the first the origin, the second the X axis, the third the XY "
+       "plane."),
     _A("process.interpolate", "Process", "Interpolate Gaps", "", "process.interpolate_gaps", "project",
        "Fill the gaps of the selected (or all) points in the active range (see the Gap-Filling properties).",
        separator_before=True),
@@ -341,11 +368,79 @@ ACTIONS: tuple[Action, ...] = (
        while_busy=True),
     _A("view2d.pixel_report", CONTEXT_2D, "Pixel Report", "", "views.toggle_display", "always",
        "Show x, y and grey level under the mouse.", checkable=True, arg="pixel_report", while_busy=True),
-    _na("view2d.rom", CONTEXT_2D, "ROM", "ROM initialisation", checkable=True),
+    _A("view2d.rom", CONTEXT_2D, "ROM", "", "rom.toggle_display", "always",
+       "Draw the loaded ROM's points (pale blue) where the ROM cameras see them; click one to select it.",
+       checkable=True, while_busy=True),
     _A("view2d.sticks", CONTEXT_2D, "Sticks", "", "views.toggle_display", "always",
        "Draw sticks.", checkable=True, arg="sticks", while_busy=True),
     _A("view2d.labels_all", CONTEXT_2D, "Point Labels: All", "", "views.toggle_labels_all", "project",
        "Show every point label (the Display property Point Labels : All).", checkable=True),
+    # ------------------------------------------------------------- Tracker pane (the Target Tracker)
+    _A("tracker.back_to_start", TRACKER_PANE, "Track back to start", "", "target.track", "project",
+       "Track the selected points back to the start of the active range (or until a stop setting ends it).",
+       arg="back_to_start", while_busy=True),
+    _A("tracker.back_one", TRACKER_PANE, "Track back one frame", "", "target.track", "project",
+       "Track the selected points back one frame and go there.", arg="back_one"),
+    _A("tracker.forward_one", TRACKER_PANE, "Track forward one frame", "", "target.track", "project",
+       "Track the selected points forward one frame and go there.", arg="forward_one"),
+    _A("tracker.forward_to_end", TRACKER_PANE, "Track forward to end", "", "target.track", "project",
+       "Track the selected points to the end of the active range (or until a stop setting ends it).",
+       arg="forward_to_end", while_busy=True),
+    _A("tracker.clear", TRACKER_PANE, "Clear Tracked Points", "", "target.clear_tracked", "project",
+       "Delete the selected points' target-tracked 2D samples and keyframes in the active range."),
+    _A("tracker.add_keyframe", TRACKER_PANE, "Add Keyframe To Current Frame", "", "target.add_keyframe", "project",
+       "Key the selected points' 2D samples on this frame (every channel that has one)."),
+    _A("tracker.nudge_left", TRACKER_PANE, "Nudge Keyframe Left", "Ctrl+Shift+Left", "target.nudge", "project",
+       "Move the selected point's keyframe one pixel left in the active (or selected) view.", arg="left"),
+    _A("tracker.nudge_right", TRACKER_PANE, "Nudge Keyframe Right", "Ctrl+Shift+Right", "target.nudge", "project",
+       "Move the selected point's keyframe one pixel right in the active (or selected) view.", arg="right"),
+    _A("tracker.nudge_up", TRACKER_PANE, "Nudge Keyframe Up", "Ctrl+Shift+Up", "target.nudge", "project",
+       "Move the selected point's keyframe one pixel up in the active (or selected) view.", arg="up"),
+    _A("tracker.nudge_down", TRACKER_PANE, "Nudge Keyframe Down", "Ctrl+Shift+Down", "target.nudge", "project",
+       "Move the selected point's keyframe one pixel down in the active (or selected) view.", arg="down"),
+    # ------------------------------------------------------------- 3D context menu
+    _A("view3d.fit_to_points", CONTEXT_3D, "Fit To Points", "", "viewctx.fit_to_points", "project",
+       "Move the 3D view to fit the selected points (all points when none is selected).", while_busy=True),
+    _A("view3d.center_selection", CONTEXT_3D, "Center Selection", "", "viewctx.center_selection", "project",
+       "Turn about the selection's centre and put it in the middle of the 3D view.", while_busy=True),
+    _A("view3d.frame_selection", CONTEXT_3D, "Frame Selection", "", "viewctx.frame_selection", "project",
+       "Centre and zoom the 3D view onto the selection.", while_busy=True),
+    _A("view3d.face_points", CONTEXT_3D, "Face Points", "", "views.toggle_display", "always",
+       "Draw the face points.", checkable=True, arg="face_points", separator_before=True, while_busy=True),
+    _A("view3d.brim_points", CONTEXT_3D, "Calibration Brim Points", "", "views.toggle_display", "always",
+       "Draw the calibration brim points (green).", checkable=True, arg="brim_points", while_busy=True),
+    _A("view3d.reconstruction_colors", CONTEXT_3D, "Reconstruction Type Colors", "", "views.toggle_display",
+       "always", "Colour face points by how they were reconstructed: yellow from matched detections, orange "
+       "with patch-matched data, red fully predicted or interpolated (cleared: all yellow).", checkable=True,
+       arg="reconstruction_colors", while_busy=True),
+    _A("view3d.cameras", CONTEXT_3D, "Cameras", "", "views.toggle_display", "always",
+       "Draw the cameras of the current frame.", checkable=True, arg="cameras", while_busy=True),
+    _A("view3d.rays", CONTEXT_3D, "Rays", "", "views.toggle_display", "always",
+       "Draw lines from the selected points to the cameras whose 2D data they use.", checkable=True, arg="rays",
+       while_busy=True),
+    _A("view3d.rom", CONTEXT_3D, "ROM", "", "views.toggle_display", "always",
+       "Draw the points of the loaded ROM's frame as pale blue dots (nothing when no ROM is loaded).",
+       checkable=True, arg="rom_3d", while_busy=True),
+    _A("view3d.sticks", CONTEXT_3D, "Sticks", "", "views.toggle_display", "always",
+       "Draw the sticks (and the stick mesh).", checkable=True, arg="sticks_3d", while_busy=True),
+    _A("view3d.labels_all", CONTEXT_3D, "Point Labels: All", "", "views.toggle_labels_all", "project",
+       "Show every point label (the Display property Point Labels : All).", checkable=True),
+    # ---------------------------------------------------------- Graph context menu
+    _A("graph.fit_to_data", CONTEXT_GRAPH, "Fit To Data", "", "viewctx.graph_fit_to_data", "project",
+       "Zoom to the data of the selected points (nothing selected: no change).", while_busy=True),
+    _A("graph.track_data", CONTEXT_GRAPH, "Track Data", "", "viewctx.graph_track_data", "project",
+       "Show the 2D image x and y of the selected points in the graph's sensor.", checkable=True,
+       while_busy=True),
+    _A("graph.recon_data", CONTEXT_GRAPH, "Recon Data", "", "viewctx.graph_recon_data", "project",
+       "Show the 3D x, y and z (mm) of the selected points (red x, green y, blue z).", checkable=True,
+       while_busy=True),
+    # ----------------------------------------------------- Continuity context menu
+    _A("continuity.collapse_all", CONTEXT_CONTINUITY, "Collapse All", "", "viewctx.continuity_collapse_all",
+       "project", "Show one bar per point, no channel rows.", while_busy=True),
+    _A("continuity.expand_all", CONTEXT_CONTINUITY, "Expand All", "", "viewctx.continuity_expand_all",
+       "project", "Show the channel rows of every point.", while_busy=True),
+    _A("continuity.fit_to_data", CONTEXT_CONTINUITY, "Fit To Data", "", "viewctx.continuity_fit_to_data",
+       "project", "Show the selected points (all points when none is selected).", while_busy=True),
 )
 del _A
 
@@ -358,7 +453,7 @@ PANELS: tuple[tuple[str, str], ...] = (
 _BY_ID = {a.id: a for a in ACTIONS}
 assert len(_BY_ID) == len(ACTIONS), "duplicate action id"
 assert all(a.enabled_when in ENABLE_CONDITIONS for a in ACTIONS)
-assert all(a.top_menu in MENUS or a.menu == CONTEXT_2D for a in ACTIONS)
+assert all(a.top_menu in MENUS or a.menu in CONTEXT_MENUS or a.menu == TRACKER_PANE for a in ACTIONS)
 
 
 def action(action_id: str) -> Action:
@@ -367,14 +462,14 @@ def action(action_id: str) -> Action:
 
 
 def menu_actions(menu: str) -> list[Action]:
-    """Actions of one menu path, in order (``"Edit"``, ``"Process > ROM Tools"``, :data:`CONTEXT_2D`)."""
+    """Actions of one menu path, in order (``"Edit"``, ``"Process > ROM Tools"``, one of :data:`CONTEXT_MENUS`)."""
     return [a for a in ACTIONS if a.menu == menu]
 
 
 def shortcut_table() -> list[dict]:
     """``[{"menu", "action", "shortcut"}]`` of every menu-bar action of the registry (no window needed)."""
     return [{"menu": a.top_menu, "action": a.title, "shortcut": a.shortcut}
-            for a in ACTIONS if a.menu != CONTEXT_2D]
+            for a in ACTIONS if a.menu not in CONTEXT_MENUS]
 
 
 def mnemonic_titles(titles: list[str], fixed: dict[int, str] | None = None) -> list[str]:

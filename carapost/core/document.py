@@ -46,6 +46,8 @@ class Document:
         self.stack = UndoStack(project)
         self.selection = Selection()
         self.current_frame = project.active_range[0]
+        #: View > Toggle Show Stabilized: views show stabilised positions (a view setting, not an edit).
+        self.show_stabilized = False
         self._listeners: list[Callable[[str], None]] = []
         self.stack.add_listener(lambda event, cmd: self._notify("project"))
         self.stack.add_listener(self._drop_stale_selection)
@@ -74,6 +76,12 @@ class Document:
             self._notify("frame")
         return f
 
+    def set_show_stabilized(self, on: bool) -> None:
+        """Show stabilised (True) or raw (False) positions; listeners hear ``"display"``."""
+        if bool(on) != self.show_stabilized:
+            self.show_stabilized = bool(on)
+            self._notify("display")
+
     def select_points(self, ids, add: bool = False) -> None:
         """Select points (``add``: extend the selection, as Ctrl+click)."""
         if not add:
@@ -90,7 +98,7 @@ class Document:
 
     # -------------------------------------------------------------- listening
     def add_listener(self, fn: Callable[[str], None]) -> None:
-        """``fn(what)`` with what in ``"project"``, ``"frame"``, ``"selection"``."""
+        """``fn(what)`` with what in ``"project"``, ``"frame"``, ``"selection"``, ``"display"``."""
         self._listeners.append(fn)
 
     def remove_listener(self, fn) -> None:

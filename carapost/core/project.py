@@ -96,6 +96,9 @@ class Project:
         self.pico_blob_parameters: dict = {}
         #: Where the project was loaded from or last saved to.
         self.path: str = ""
+        #: Stabilize Data / Align Data result, beside the raw positions
+        #: (a :class:`~carapost.core.stabilize.Stabilization`, or None).
+        self.stabilization = None
 
     # ------------------------------------------------------------- structure
     @property
@@ -190,6 +193,8 @@ class Project:
             put(self.brim.name, self.brim.markers, self.brim.svg)
         put(self.labels, [(s.a, s.b, s.color) for s in self.sticks], self.rom_path, self.active_range,
             self.view_range, self.channel_selection, self.properties.to_dict(), self.pico_blob_parameters)
+        if self.stabilization is not None:
+            put("stabilization", *self.stabilization.digest_items())
         return h.hexdigest()
 
     def memory_bytes(self) -> int:

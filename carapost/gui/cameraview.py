@@ -13,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPoint, QPointF, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import QColor, QPainterPath, QPalette, QPen, QPolygonF, QTransform
+from PySide6.QtGui import QColor, QPainterPath, QPalette, QPen, QTransform
 from PySide6.QtWidgets import QFrame, QGraphicsItem, QGraphicsRectItem, QGraphicsSimpleTextItem
 
 from ..core.points import SRC_DETECTION, SRC_KEYFRAME, SRC_NONE, SRC_TARGET
-from . import blobpreview
+from . import blobpreview, picking
 from .overlays import (GreyImageItem, HudItem, LabelsItem, boxes, checker_brush, circles, combine, crosses,
                        ellipses, finite, path_item, segments, segments_item, xs)
 
@@ -33,7 +33,7 @@ RING_PAD = 4.0     #: point ring beyond its detection's ellipse
 POINT_R = 7.0      #: point ring without a detection (patch, target)
 SELECT_R = 11.0    #: selection highlight
 HOVER_R = 14.0     #: pre-selection highlight
-PICK_TOLERANCE = 9.0   #: a click picks the nearest point or detection within this many screen pixels
+PICK_TOLERANCE = picking.PICK_TOLERANCE
 
 
 class SensorViewBox(pg.ViewBox):
@@ -126,11 +126,12 @@ class CameraView(pg.GraphicsView):
 
         self.measuring = False
         self._measure_line = None
-        self._lasso: list[QPointF] = []
+        self._region: picking.RegionDrag | None = None
         self._pixel_text = ""
         self._preview_failed = False
         self._border = ""
         self._sensor_size = (0, 0)
+        self._bounds = QRectF()          # where any overlay may be (the image and a margin)
         self._rotation = -1
         self._flash = QTimer(self)
         self._flash.setInterval(300)
@@ -229,7 +230,7 @@ class CameraView(pg.GraphicsView):
             path.addRect(rect)
             self.border.setPath(path)
             margin = max(size) * 0.5
-            bounds = rect.adjusted(-margin, -margin, margin, margin)
+            bounds = self._bounds = rect.adjusted(-margin, -margin, margin, margin)
             self.labels.set_labels(np.zeros((0, 2)), [], [], 10, bounds)
             for it in list(self.items.values()) + list(self.stick_items.values()):
                 it.set_bounds(bounds)
@@ -261,7 +262,7 @@ class CameraView(pg.GraphicsView):
         for it in self.stick_items.values():
             it.clear()
         if p is None or fd is None or self.sensor >= p.sensor_count:
-            self.labels.set_labels(np.zeros((0, 2)), [], [], 10, self.labels.boundingRect())
+            self.labels.set_labels(np.zeros((0, 2)), [], [], 10, QRectF())
             self._update_info()
             return
         s, f, d = self.sensor, ses.frame, ses.display
@@ -344,7 +345,7 @@ class CameraView(pg.GraphicsView):
             item = self.stick_items.get(color)
             if item is None:
                 item = self.stick_items[color] = segments_item(self.content, color, 1, z=12)
-                item.set_bounds(self.labels.boundingRect())
+                item.set_bounds(self._bounds)
             a = xy[[i for i, _ in pairs]]
             b = xy[[j for _, j in pairs]]
             ok = finite(a) & finite(b)
@@ -382,17 +383,17 @@ class CameraView(pg.GraphicsView):
         rows = [r for r in rows if r >= 0]
         sxy = xy[rows] if rows else np.zeros((0, 2))
         ok = finite(sxy)
-        self.items["selected"].set_shapes(circles(sxy[ok, 0], sxy[ok, 1], SELECT_R * px))
-        self.items["selected_sticks"].set_shapes(self._stick_segments(p, fd, sel.sticks))
+        self._set_tight("selected", circles(sxy[ok, 0], sxy[ok, 1], SELECT_R * px), px)
+        self._set_tight("selected_sticks", self._stick_segments(p, fd, sel.sticks), px)
         rec = p.detections[s].frame(f)
         dsel = [i for (ds, df, i) in sel.detections if ds == s and df == f and i < len(rec)]
         if dsel:
             r = rec[dsel]
-            self.items["selected_detections"].set_shapes(ellipses(
+            self._set_tight("selected_detections", ellipses(
                 r["x"].astype(float), r["y"].astype(float), r["major"].astype(float) / 2 + 3 * px,
-                r["minor"].astype(float) / 2 + 3 * px, r["angle"].astype(float)))
+                r["minor"].astype(float) / 2 + 3 * px, r["angle"].astype(float)), px)
         else:
-            self.items["selected_detections"].clear()
+            self._set_tight("selected_detections", combine(), px)
         hover_row = -1
         hv = ses.hover
         hover = combine()
@@ -404,7 +405,7 @@ class CameraView(pg.GraphicsView):
             r = rec[hv[1][2]]
             hover = ellipses([float(r["x"])], [float(r["y"])], [float(r["major"]) / 2 + 4 * px],
                              [float(r["minor"]) / 2 + 4 * px], [float(r["angle"])])
-        self.items["hover"].set_shapes(hover)
+        self._set_tight("hover", hover, px)
         if not len(hover[0]):
             self._flash.stop()
             self.items["hover"].setVisible(True)
@@ -415,19 +416,33 @@ class CameraView(pg.GraphicsView):
 
     def _draw_labels(self, p, fd, xy, sel_rows: set, hover_row: int) -> None:
         props = p.properties
-        show_all = props["display.point_labels_all"]
-        want = []
-        for r, lb in enumerate(fd.labels):
-            if not lb:
-                continue
-            if show_all or (r in sel_rows and props["display.point_labels_selected"]) or (
-                    r == hover_row and props["display.point_labels_pre_selected"]):
-                want.append(r)
-        want = [r for r in want if np.all(np.isfinite(xy[r]))]
+        want = [r for r in picking.label_rows(props, fd.labels, sel_rows, hover_row) if np.all(np.isfinite(xy[r]))]
         colors = [QColor(255, 255, 255) if r in sel_rows else QColor(0, 255, 255) if r == hover_row
                   else QColor(230, 230, 150) for r in want]
-        self.labels.set_labels(xy[want] if want else np.zeros((0, 2)), [fd.labels[r] for r in want], colors,
-                               props["display.font_size"], self.labels.boundingRect())
+        texts = [fd.labels[r] for r in want]
+        size = props["display.font_size"]
+        bounds = QRectF()
+        if want:
+            # texts keep their screen size beside the point, in any direction once the view is rotated
+            reach = (max(len(t) for t in texts) * size * 1.4 + 3 * size + 16) * self.pixel_size()
+            lo, hi = np.nanmin(xy[want], axis=0), np.nanmax(xy[want], axis=0)
+            bounds = QRectF(lo[0] - reach, lo[1] - reach, hi[0] - lo[0] + 2 * reach, hi[1] - lo[1] + 2 * reach)
+        self.labels.set_labels(xy[want] if want else np.zeros((0, 2)), texts, colors, size, bounds)
+
+    def _set_tight(self, name: str, segs, px: float) -> None:
+        """Draw a selection layer with bounds around its shapes: a selection change repaints only there."""
+        x0, y0, x1, y1 = segs
+        rect = QRectF()
+        if len(x0):
+            xs, ys = np.concatenate([x0, x1]), np.concatenate([y0, y1])
+            ok = np.isfinite(xs) & np.isfinite(ys)
+            if ok.any():
+                m = 4 * px          # the pen's width and antialiasing
+                lo_x, hi_x, lo_y, hi_y = xs[ok].min(), xs[ok].max(), ys[ok].min(), ys[ok].max()
+                rect = QRectF(lo_x - m, lo_y - m, hi_x - lo_x + 2 * m, hi_y - lo_y + 2 * m)
+        item = self.items[name]
+        item.set_bounds(rect)       # the old bounds are repainted (the shapes leave them) ...
+        item.set_shapes(segs)       # ... and the new ones
 
     def _update_info(self) -> None:
         ses = self.session
@@ -492,27 +507,7 @@ class CameraView(pg.GraphicsView):
         if self.session.project is None:
             return None
         kinds, keys, xy = self.candidates()
-        if not len(xy):
-            return None
-        d = np.hypot(xy[:, 0] - x, xy[:, 1] - y)
-        # Points win ties with the detection under them.
-        d = d + np.array([0.0 if k == "point" else 1e-3 for k in kinds])
-        i = int(np.argmin(d))
-        if d[i] > PICK_TOLERANCE * self.pixel_size():
-            return None
-        return kinds[i], keys[i]
-
-    def pick_region(self, contains) -> tuple[list[int], list[tuple]]:
-        """Points and detections whose view position satisfies ``contains(QPointF)``."""
-        kinds, keys, xy = self.candidates()
-        if not len(xy):
-            return [], []
-        v = self.raw_to_view(xy)
-        pts, dets = [], []
-        for k, key, (vx, vy) in zip(kinds, keys, v):
-            if contains(QPointF(vx, vy)):
-                (pts if k == "point" else dets).append(key)
-        return pts, dets
+        return picking.nearest(kinds, keys, xy, x, y, PICK_TOLERANCE * self.pixel_size())
 
     def pick_stick(self, x: float, y: float) -> int | None:
         """Index of the stick nearest raw (x, y) within the tolerance."""
@@ -521,20 +516,11 @@ class CameraView(pg.GraphicsView):
             return None
         xy = fd.position_2d(self.sensor)
         row = {int(pid): i for i, pid in enumerate(fd.ids)}
-        best, best_d = None, PICK_TOLERANCE * self.pixel_size()
-        q = np.array([x, y])
-        for k, st in enumerate(p.sticks):
-            if st.a not in row or st.b not in row:
-                continue
-            a, b = xy[row[st.a]], xy[row[st.b]]
-            if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-                continue
-            ab = b - a
-            t = np.clip(np.dot(q - a, ab) / max(np.dot(ab, ab), 1e-9), 0, 1)
-            dist = float(np.linalg.norm(a + t * ab - q))
-            if dist < best_d:
-                best, best_d = k, dist
-        return best
+        ks = [k for k, st in enumerate(p.sticks) if st.a in row and st.b in row]
+        a = xy[[row[p.sticks[k].a] for k in ks]]
+        b = xy[[row[p.sticks[k].b] for k in ks]]
+        i = picking.nearest_segment(a, b, x, y, PICK_TOLERANCE * self.pixel_size())
+        return None if i is None else ks[i]
 
     # =================================================================== mouse
     def _raw_of(self, ev_pos) -> tuple[float, float]:
@@ -563,19 +549,8 @@ class CameraView(pg.GraphicsView):
         if ses.click_mode:
             self.targetClicked.emit(self.sensor, x, y)
             return
-        toggle = bool(mods & M.ControlModifier)
         hit = self.pick(x, y)
-        if hit is None:
-            stick = self.pick_stick(x, y)
-            if stick is not None:
-                ses.select_sticks([stick], add=toggle)
-            elif not toggle:
-                ses.select()
-            return
-        if hit[0] == "point":
-            ses.select(points=[hit[1]], toggle=toggle)
-        else:
-            ses.select(detections=[hit[1]], toggle=toggle)
+        picking.click(ses, hit, self.pick_stick(x, y) if hit is None else None, bool(mods & M.ControlModifier))
 
     def handle_drag(self, ev) -> bool:
         """Our drags; False hands the event to pyqtgraph (middle-drag pan, Shift+right-drag zoom)."""
@@ -597,29 +572,16 @@ class CameraView(pg.GraphicsView):
         if self.measuring:
             self._measure(start, now)
             return True
-        lasso = bool(mods & M.ShiftModifier and mods & M.AltModifier)
-        if ev.isStart():
-            self._lasso = [start]
-        if lasso:
-            self._lasso.append(now)
-            path = QPainterPath()
-            path.addPolygon(QPolygonF(self._lasso))
-            path.closeSubpath()
-        else:
-            path = QPainterPath()
-            path.addRect(QRectF(start, now).normalized())
-        self.band.setPath(path)
+        if ev.isStart() or self._region is None:
+            self._region = picking.RegionDrag(start, lasso=bool(mods & M.ShiftModifier and mods & M.AltModifier))
+        self._region.move(now)
+        self.band.setPath(self._region.path())
         if ev.isFinish():
             self.band.setPath(QPainterPath())
-            if lasso:
-                poly = QPolygonF(self._lasso)
-                pts, dets = self.pick_region(lambda q: poly.containsPoint(q, Qt.FillRule.OddEvenFill))
-            else:
-                rect = QRectF(start, now).normalized()
-                pts, dets = self.pick_region(rect.contains)
+            kinds, keys, xy = self.candidates()
             self.session.set_active_sensor(self.sensor)
-            self.session.select(points=pts, detections=dets, add=bool(mods & M.ControlModifier))
-            self._lasso = []
+            self._region.select(self.session, kinds, keys, self.raw_to_view(xy), add=bool(mods & M.ControlModifier))
+            self._region = None
         return True
 
     def _measure(self, a: QPointF, b: QPointF) -> None:

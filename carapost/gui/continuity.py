@@ -16,7 +16,8 @@ Mouse: click selects the point of a row and goes to the clicked frame
 (Ctrl+click toggles it in the selection), drag scrubs frames, double-click
 expands / collapses a point, Alt+Shift+drag zooms to the dragged rectangle,
 (Shift+)middle-drag pans, (Shift+)right-drag zooms, the wheel zooms frames,
-right-click opens the context menu (Collapse All, Expand All, Fit To Data).
+right-click opens the Continuity context menu (Collapse All, Expand All, Fit To Data: the
+action registry's items, see :mod:`carapost.gui.viewgrid`).
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPoint, QPointF, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QPainterPath, QPen
-from PySide6.QtWidgets import QGraphicsPathItem, QMenu
+from PySide6.QtWidgets import QGraphicsPathItem
 
 from ..core.continuity import C_GAP, ContinuityModel
 
@@ -449,16 +450,6 @@ class ContinuityChart(ContinuityBars):
     def double_clicked(self, pid, ch, frame) -> None:
         if pid is not None:
             self.toggle_expanded(pid)
-
-    def add_menu_items(self, menu: QMenu) -> None:
-        """The Continuity context menu's own items."""
-        for text, fn, tip in (
-                ("Collapse All", self.collapse_all, "Show one bar per point, no channel rows"),
-                ("Expand All", self.expand_all, "Show the channel rows of every point"),
-                ("Fit To Data", self.fit_to_data, "Show the selected points (all points when none is selected)")):
-            a = menu.addAction(text)
-            a.setToolTip(tip)
-            a.triggered.connect(fn)
 
 
 class SelectedPointBars(ContinuityBars):

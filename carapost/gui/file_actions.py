@@ -24,6 +24,7 @@ XCP_FILTER = "Calibration files (*.xcp);;All files (*)"
 TEXT_FILTER = "Label text files (*.txt);;All files (*)"
 SVG_FILTER = "Calibration brim (*.svg);;All files (*)"
 C3D_FILTER = "C3D files (*.c3d)"
+FBX_FILTER = "FBX files (*.fbx)"
 XCP_SAVE_FILTER = "Calibration files (*.xcp)"
 
 
@@ -235,15 +236,25 @@ class FileActions:
             path += suffix
         return path
 
+    def _export_in_background(self, title: str, file_filter: str, suffix: str, writer) -> None:
+        """Ask for the file, then run ``writer(project, path)`` off the GUI thread (a long take writes for a while)."""
+        project = self.session.project
+        path = self._export_path(title, file_filter, suffix)
+        if path:
+            self.w.runner.run(lambda _progress: writer(project, path), f"{title} {Path(path).name}",
+                              cancellable=False)
+
     def export_c3d(self) -> None:
-        """File > Export C3D (in the background: a long take writes for a while)."""
+        """File > Export C3D."""
         from ..io.export_c3d import export_c3d
 
-        project = self.session.project
-        path = self._export_path("Export C3D", C3D_FILTER, ".c3d")
-        if path:
-            self.w.runner.run(lambda _progress: export_c3d(project, path), f"Export C3D {Path(path).name}",
-                              cancellable=False)
+        self._export_in_background("Export C3D", C3D_FILTER, ".c3d", export_c3d)
+
+    def export_fbx(self) -> None:
+        """File > Export FBX."""
+        from ..io.export_fbx import write_fbx
+
+        self._export_in_background("Export FBX", FBX_FILTER, ".fbx", write_fbx)
 
     def export_xcp(self) -> None:
         """File > Export XCP [Current Frame]."""

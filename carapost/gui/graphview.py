@@ -3,7 +3,8 @@
 For each selected point: x, y, z of its 3D position (red, green, blue solid
 lines) and, when the point has 2D data in the chosen sensor, its image x and y
 there (red and green dashed lines): five lines, or three when the point is not
-seen by that sensor.  Context menu: Fit To Data, Track Data (2D lines on/off),
+seen by that sensor.  Context menu (the action registry's Graph items, built by
+:mod:`carapost.gui.viewgrid`): Fit To Data, Track Data (2D lines on/off),
 Recon Data (3D lines on/off), Sensor.  Mouse: click goes to a frame,
 (Shift+)middle-drag pans, (Shift+)right-drag zooms, Alt+Shift+drag zooms to a
 rectangle, the wheel zooms.
@@ -13,8 +14,6 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPoint, QRectF, Qt, Signal
-from PySide6.QtGui import QActionGroup
-from PySide6.QtWidgets import QMenu
 
 AXIS_COLORS = ((230, 50, 50), (50, 210, 50), (70, 120, 255))   #: x, y, z
 
@@ -192,29 +191,3 @@ class GraphView(pg.PlotWidget):
             return
         pad = max((hi - lo) * 0.05, 1.0)
         self.vb.setRange(xRange=(f0, max(f1, f0 + 1)), yRange=(lo - pad, hi + pad), padding=0.02)
-
-    # ------------------------------------------------------------------ menu
-    def add_menu_items(self, menu: QMenu) -> None:
-        """The Graph context menu's own items."""
-        a = menu.addAction("Fit To Data")
-        a.setToolTip("Zoom to the data of the selected points")
-        a.triggered.connect(self.fit_to_data)
-        a = menu.addAction("Track Data")
-        a.setCheckable(True)
-        a.setChecked(self.track_data)
-        a.setToolTip("Show the 2D image x and y of the selected points in the graph's sensor")
-        a.toggled.connect(self.set_track_data)
-        a = menu.addAction("Recon Data")
-        a.setCheckable(True)
-        a.setChecked(self.recon_data)
-        a.setToolTip("Show the 3D x, y and z (mm) of the selected points")
-        a.toggled.connect(self.set_recon_data)
-        m = menu.addMenu("Sensor")
-        group = QActionGroup(m)
-        p = self.session.project
-        for s in range(p.sensor_count if p is not None else 0):
-            a = m.addAction(f"Sensor {s}")
-            a.setCheckable(True)
-            a.setChecked(s == self.sensor)
-            a.triggered.connect(lambda _=False, s=s: self.set_sensor(s))
-            group.addAction(a)

@@ -33,10 +33,13 @@ from .panes.tracker import TrackerPane
 from .process_actions import ProcessActions
 from .prompts import Prompts
 from .recovery import Recovery
+from .rom_actions import RomActions
 from .session import DisplayOptions, Session
 from .settings import app_settings, read_bool
+from .stabilize_actions import StabilizeActions
+from .target_actions import TargetActions
 from .timebar import TimePanel
-from .view_actions import ContextActions, HelpActions, ViewActions
+from .view_actions import ContextActions, HelpActions, ViewActions, ViewContextActions
 from .viewgrid import ViewGrid
 
 log = logging.getLogger("carapost")
@@ -76,8 +79,12 @@ class MainWindow(QMainWindow):
         self.navigate = Navigation(self)
         self.views = ViewActions(self)
         self.view2d = ContextActions(self)
+        self.viewctx = ViewContextActions(self)
         self.helpmenu = HelpActions(self)
         self.process = ProcessActions(self)
+        self.stabilize = StabilizeActions(self)
+        self.rom = RomActions(self)
+        self.target = TargetActions(self)
         self.actionset = ActionSet(self)
         actions = self.actionset.actions
 
@@ -97,7 +104,7 @@ class MainWindow(QMainWindow):
         self.history = HistoryPane(self.session, actions["edit.clear_history"])
         self.properties = PropertiesPane(self.session, actions["edit.restore_defaults"])
         self.selection_pane = SelectionPane(self.session)
-        self.tracker = TrackerPane(self.session)
+        self.tracker = TrackerPane(self.session, actions)
         self.selected_point = SelectedPointPane(self.session)
         self.docks: dict[str, QDockWidget] = {}
         self._build_docks()

@@ -16,7 +16,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QMenu, QMenuBar
 
-from ..core.actions import ACTIONS, CONTEXT_2D, MENUS, Action, menu_actions, mnemonic_titles
+from ..core.actions import ACTIONS, CONTEXT_MENUS, MENUS, Action, menu_actions, mnemonic_titles
 
 log = logging.getLogger("carapost")
 
@@ -55,7 +55,7 @@ class ActionSet:
             qa.setStatusTip(a.tooltip)
             qa.setObjectName(a.id)
             qa.triggered.connect(lambda _checked=False, a=a: self.trigger(a))
-            if a.menu != CONTEXT_2D:
+            if a.menu not in CONTEXT_MENUS:
                 window.addAction(qa)   # shortcuts work with the menu bar hidden (full screen)
             self.actions[a.id] = qa
             self.spec[a.id] = a
@@ -119,11 +119,13 @@ class ActionSet:
         """Checkable actions show the state they toggle (the model is the truth)."""
         w = self.window
         d = w.session.display
+        p = w.session.project
+        labels_all = bool(p is not None and p.properties["display.point_labels_all"])
         for aid, a in self.spec.items():
             if a.handler == "views.toggle_display":
                 self._check(aid, getattr(d, a.arg))
-        p = w.session.project
-        self._check("view2d.labels_all", bool(p is not None and p.properties["display.point_labels_all"]))
+            elif a.handler == "views.toggle_labels_all":
+                self._check(aid, labels_all)
         self._check("view.full_screen", w.isFullScreen())
         self._check("view.lock_to_point", w.views.locked)
         self._check("view.play", w.navigate.playing)
@@ -183,8 +185,9 @@ class ActionSet:
                         qa = self.actions[a.id]
                         qa.setText(t)
                         sub.addAction(qa)
-        for a in menu_actions(CONTEXT_2D):
-            self.actions[a.id].setText(a.title)
+        for a in ACTIONS:
+            if a.menu in CONTEXT_MENUS:
+                self.actions[a.id].setText(a.title)
 
     def fill_recent(self) -> None:
         """File > Recent Files: the last eight projects, newest first."""

@@ -24,7 +24,7 @@ log = logging.getLogger("carapost")
 
 @dataclass
 class DisplayOptions:
-    """The camera views' display switches (the 2D context menu); shared by every view."""
+    """The views' display switches (the 2D and 3D context menus); shared by every view of a kind."""
 
     image: bool = True
     border: bool = True
@@ -37,6 +37,14 @@ class DisplayOptions:
     blob_preview: bool = False
     pixel_report: bool = False
     sticks: bool = True
+    # the 3D view's (its context menu)
+    face_points: bool = True
+    brim_points: bool = True
+    reconstruction_colors: bool = True
+    cameras: bool = True
+    rays: bool = True
+    rom_3d: bool = True
+    sticks_3d: bool = True
 
     @classmethod
     def names(cls) -> list[str]:

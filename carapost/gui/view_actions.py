@@ -1,4 +1,4 @@
-"""View menu display handlers, the camera views' context-menu items, and the Help menu."""
+"""View menu display handlers, the views' context-menu items, and the Help menu."""
 from __future__ import annotations
 
 import logging
@@ -36,6 +36,8 @@ class ViewActions:
         self.locked = False
         self._hidden_docks: list[QDockWidget] = []
         self.workspaces: list[QWidget] = []
+        #: the view grids of the floating workspaces
+        self.grids: list = []
 
     @property
     def s(self):
@@ -137,21 +139,29 @@ class ViewActions:
         log.info(f"Distance between points {pts[0]} and {pts[1]}{named} on frame {d['frame']}: "
                  f"{d['distance']:.3f} {d['units']}")
 
-    def new_workspace(self) -> None:
-        """New Floating Workspace: another window of camera views on the same take."""
+    def new_workspace(self) -> QWidget:
+        """New Floating Workspace: another window with the workspace's views, showing the 3D view first."""
         from .viewgrid import ViewGrid
 
         win = QWidget(None)
         win.setWindowTitle(f"carapost workspace {len(self.workspaces) + 1}")
         grid = ViewGrid(self.s, self.w.actionset.actions, win)
         grid.on_document()
+        grid.set_layout("1")
+        grid.set_slot_kind(0, "3d")
         grid.sensorClicked.connect(self.w.edit.sensor_click)
         grid.targetClicked.connect(self.w.edit.target_click)
-        QVBoxLayout(win).addWidget(grid)
+        lay = QVBoxLayout(win)
+        lay.setContentsMargins(2, 2, 2, 2)
+        lay.addWidget(grid)
+        # the window's shortcuts (Merge, frame steps...) work in the workspace too
+        win.addActions([a for a in self.w.actions()])
         win.resize(900, 600)
         win.show()
         self.workspaces.append(win)
-        log.info("Opened a floating workspace (its 3D view lands with a later issue)")
+        self.grids.append(grid)
+        log.info(f"Opened floating workspace {len(self.workspaces)}")
+        return win
 
     def show_brim_svg(self) -> None:
         """Show Calibration Brim SVG."""
@@ -167,6 +177,11 @@ class ViewActions:
         self.workspaces.append(w)
 
 
+def context_grid(window):
+    """The view grid (main or floating workspace) whose context menu was opened last."""
+    return max([window.grid] + window.views.grids, key=lambda g: g.menu_serial)
+
+
 class ContextActions:
     """The 2D context menu's view items, acting on the view right-clicked."""
 
@@ -174,7 +189,7 @@ class ContextActions:
         self.w = window
 
     def _view(self) -> CameraView | None:
-        return self.w.grid.target_view()
+        return context_grid(self.w).target_view()
 
     def fit(self) -> None:
         if v := self._view():
@@ -199,6 +214,58 @@ class ContextActions:
     def frame_selection(self) -> None:
         if v := self._view():
             v.frame_on(selection_xy(self.w.session, v))
+
+
+class ViewContextActions:
+    """The 3D, Graph and Continuity context menus' items, acting on the view right-clicked."""
+
+    def __init__(self, window):
+        self.w = window
+
+    def _target(self, kind: str):
+        return context_grid(self.w).context_target(kind)
+
+    def _nothing(self, what: str) -> None:
+        log.info(f"{what}: nothing selected")
+
+    # ---------------------------------------------------------------- 3D
+    def fit_to_points(self) -> None:
+        if v := self._target("3d"):
+            v.fit_to_points()
+
+    def center_selection(self) -> None:
+        if (v := self._target("3d")) and not v.center_selection():
+            self._nothing("Center Selection")
+
+    def frame_selection(self) -> None:
+        if (v := self._target("3d")) and not v.frame_selection():
+            self._nothing("Frame Selection")
+
+    # ------------------------------------------------------------- Graph
+    def graph_fit_to_data(self) -> None:
+        if v := self._target("graph"):
+            v.fit_to_data()
+
+    def graph_track_data(self) -> None:
+        if v := self._target("graph"):
+            v.set_track_data(not v.track_data)
+
+    def graph_recon_data(self) -> None:
+        if v := self._target("graph"):
+            v.set_recon_data(not v.recon_data)
+
+    # -------------------------------------------------------- Continuity
+    def continuity_collapse_all(self) -> None:
+        if v := self._target("continuity"):
+            v.collapse_all()
+
+    def continuity_expand_all(self) -> None:
+        if v := self._target("continuity"):
+            v.expand_all()
+
+    def continuity_fit_to_data(self) -> None:
+        if v := self._target("continuity"):
+            v.fit_to_data()
 
 
 THIRD_PARTY = ("PySide6-Essentials (LGPL-3.0)", "shiboken6 (LGPL-3.0)", "pyqtgraph (MIT)", "numpy (BSD-3-Clause)",

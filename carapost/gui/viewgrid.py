@@ -1,16 +1,21 @@
-"""Up to four view slots with the layout buttons and the View / 2D context menus.
+"""Up to four view slots with the layout buttons and the views' context menus.
 
-Each slot shows a camera view (Sensor 0-3), the Continuity chart or the Graph
-view; the View submenu of a slot's context menu switches it.  ``views`` are
-always the slots' camera views (hidden while their slot shows another kind)."""
+Each slot shows a camera view (Sensor 0-3), the 3D view, the Graph view or the
+Continuity chart; the View submenu of a slot's context menu switches it.
+``views`` are always the slots' camera views (hidden while their slot shows
+another kind).  The context menus' items come from the action registry
+(:data:`~carapost.core.actions.CONTEXT_MENUS`); their handlers act on the view
+last right-clicked (:meth:`ViewGrid.context_target`)."""
 from __future__ import annotations
+
+import itertools
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QAction, QActionGroup
 from PySide6.QtWidgets import (QButtonGroup, QGridLayout, QHBoxLayout, QLabel, QMenu, QStackedWidget, QToolButton,
                                QVBoxLayout, QWidget)
 
-from ..core.actions import CONTEXT_2D, menu_actions
+from ..core.actions import CONTEXT_2D, CONTEXT_3D, CONTEXT_CONTINUITY, CONTEXT_GRAPH, menu_actions
 from .cameraview import CameraView
 
 #: name -> (tooltip, rows, columns); a layout button also restores every view's zoom.
@@ -21,8 +26,13 @@ LAYOUTS = {
     "1x4": ("Four camera views in a row", 1, 4),
 }
 MAX_VIEWS = 4
-#: What a slot can show besides a sensor.
-SLOT_KINDS = ("sensor", "graph", "continuity")
+#: What a slot can show.
+SLOT_KINDS = ("sensor", "3d", "graph", "continuity")
+#: The View submenu's entries besides the sensors: (title, kind).
+VIEW_CHOICES = (("3D", "3d"), ("Graph", "graph"), ("Continuity", "continuity"))
+#: The registry's context menu of each kind.
+CONTEXT_OF = {"sensor": CONTEXT_2D, "3d": CONTEXT_3D, "graph": CONTEXT_GRAPH, "continuity": CONTEXT_CONTINUITY}
+_menu_serial = itertools.count(1)
 
 
 class ViewGrid(QWidget):
@@ -44,6 +54,9 @@ class ViewGrid(QWidget):
         self.actions = actions or {}
         self.layout_name = "2x2"
         self.context_view: CameraView | None = None
+        #: the widget (of any kind) last right-clicked, and when (the newest grid's menu is the one in use)
+        self.context_widget = None
+        self.menu_serial = 0
         bar = QHBoxLayout()
         bar.setContentsMargins(2, 0, 2, 0)
         bar.addWidget(QLabel("Views:"))
@@ -59,7 +72,7 @@ class ViewGrid(QWidget):
         self.grid.setContentsMargins(0, 0, 0, 0)
         self.views = [CameraView(session, i, self) for i in range(MAX_VIEWS)]
         self.slots = [QStackedWidget(self) for _ in range(MAX_VIEWS)]
-        #: per slot: "sensor", "graph" or "continuity"
+        #: per slot: one of SLOT_KINDS
         self.kinds = ["sensor"] * MAX_VIEWS
         self._others: list[dict] = [{} for _ in range(MAX_VIEWS)]   # kind -> widget, made on first use
         for slot, v in zip(self.slots, self.views):
@@ -117,11 +130,11 @@ class ViewGrid(QWidget):
         return -1
 
     def slot_widget(self, index: int):
-        """What slot ``index`` shows: its CameraView, ContinuityChart or GraphView."""
+        """What slot ``index`` shows: its CameraView, View3D, GraphView or ContinuityChart."""
         return self.slots[index].currentWidget()
 
     def set_slot_kind(self, index: int, kind: str, sensor: int | None = None) -> None:
-        """Show ``kind`` ("sensor", "graph" or "continuity") in slot ``index`` (``sensor``: for "sensor")."""
+        """Show ``kind`` (one of :data:`SLOT_KINDS`) in slot ``index`` (``sensor``: for "sensor")."""
         if kind not in SLOT_KINDS:
             raise ValueError(f"unknown view kind {kind!r}")
         slot, cam = self.slots[index], self.views[index]
@@ -135,6 +148,9 @@ class ViewGrid(QWidget):
                 if kind == "continuity":
                     from .continuity import ContinuityChart
                     w = ContinuityChart(self.session)
+                elif kind == "3d":
+                    from .view3d import View3D
+                    w = View3D(self.session)
                 else:
                     from .graphview import GraphView
                     w = GraphView(self.session, 0)       # the guide: a Graph view starts on Sensor 0
@@ -149,7 +165,7 @@ class ViewGrid(QWidget):
             cam.fit()
 
     def charts(self, kind: str) -> list:
-        """The visible slots' widgets of ``kind`` ("graph" or "continuity")."""
+        """The visible slots' widgets of ``kind`` ("3d", "graph" or "continuity")."""
         return [self.slot_widget(i) for i, s in enumerate(self.slots)
                 if self.kinds[i] == kind and s.isVisibleTo(self)]
 
@@ -182,8 +198,8 @@ class ViewGrid(QWidget):
         return None
 
     # ------------------------------------------------------------ context menu
-    def build_context_menu(self, view: CameraView) -> QMenu:
-        """The 2D context menu of ``view`` (View / Sensor submenus, then the registry's 2D items)."""
+    def build_context_menu(self, view) -> QMenu:
+        """The context menu of ``view``: the View submenu, then its kind's registry items (and Sensor)."""
         menu = QMenu(self)
         menu.setToolTipsVisible(True)
         p = self.session.project
@@ -194,51 +210,67 @@ class ViewGrid(QWidget):
         m_view = menu.addMenu("View")
         m_view.setToolTipsVisible(True)
         group = QActionGroup(m_view)
-        a = m_view.addAction("3D")
-        a.setEnabled(False)
-        a.setToolTip("Not available yet: the 3D view lands with a later issue.")
-        for name, k in (("Graph", "graph"), ("Continuity", "continuity")):
-            a = QAction(name, m_view, checkable=True, checked=(kind == k))
-            a.setToolTip(f"Show the {name} view in this view")
-            a.triggered.connect(lambda _=False, i=index, k=k: self.set_slot_kind(i, k))
+        choices = [(name, k, None) for name, k in VIEW_CHOICES] + [(f"Sensor {s}", "sensor", s) for s in sensors]
+        for name, k, s in choices:
+            on = kind == k and (s is None or s == cam.sensor)
+            a = QAction(name, m_view, checkable=True, checked=on)
+            a.setToolTip(f"Show {'the ' + name + ' view' if s is None else name} in this view")
+            a.triggered.connect(lambda _=False, i=index, k=k, s=s: self.set_slot_kind(i, k, s))
             group.addAction(a)
             m_view.addAction(a)
-        for s in sensors:
-            a = QAction(f"Sensor {s}", m_view, checkable=True, checked=(kind == "sensor" and s == cam.sensor))
-            a.triggered.connect(lambda _=False, i=index, s=s: self.set_slot_kind(i, "sensor", s))
-            group.addAction(a)
-            m_view.addAction(a)
-        if kind != "sensor":                 # the Graph / Continuity context menu
-            view.add_menu_items(menu)
-            return menu
-        m_sensor = menu.addMenu("Sensor")
-        group = QActionGroup(m_sensor)
-        for s in sensors:
-            a = QAction(f"Sensor {s}", m_sensor, checkable=True, checked=(s == view.sensor))
-            a.triggered.connect(lambda _=False, s=s, v=view: v.set_sensor(s))
-            group.addAction(a)
-            m_sensor.addAction(a)
-        for act in menu_actions(CONTEXT_2D):
+        if kind == "sensor":
+            self._sensor_menu(menu, sensors, view.sensor, view.set_sensor)
+        if kind == "graph":     # each Graph view has its own Track / Recon Data switches
+            for aid, on in (("graph.track_data", view.track_data), ("graph.recon_data", view.recon_data)):
+                if aid in self.actions:
+                    self.actions[aid].setChecked(on)
+        for act in menu_actions(CONTEXT_OF[kind]):
             if act.separator_before:
                 menu.addSeparator()
             qa = self.actions.get(act.id)
             if qa is not None:
                 menu.addAction(qa)
+        if kind == "graph":
+            self._sensor_menu(menu, sensors, view.sensor, view.set_sensor)
         return menu
 
-    def show_context_menu(self, view: CameraView, pos) -> None:
-        if isinstance(view, CameraView):
-            self.context_view = view
-            self.session.set_active_sensor(view.sensor)
+    @staticmethod
+    def _sensor_menu(menu: QMenu, sensors, current: int, choose) -> None:
+        m = menu.addMenu("Sensor")
+        group = QActionGroup(m)
+        for s in sensors:
+            a = QAction(f"Sensor {s}", m, checkable=True, checked=(s == current))
+            a.triggered.connect(lambda _=False, s=s: choose(s))
+            group.addAction(a)
+            m.addAction(a)
+
+    def show_context_menu(self, view, pos) -> None:
+        self.note_context(view)
         menu = self.build_context_menu(view)
         menu.exec(pos)
         menu.deleteLater()
+
+    def note_context(self, view) -> None:
+        """Remember ``view`` as the one the context menu's items act on."""
+        if isinstance(view, CameraView):
+            self.context_view = view
+            self.session.set_active_sensor(view.sensor)
+        self.context_widget = view
+        self.menu_serial = next(_menu_serial)
 
     def target_view(self) -> CameraView | None:
         """The view a context-menu item acts on: the one right-clicked, else the active one."""
         if self.context_view is not None and self.context_view.isVisibleTo(self):
             return self.context_view
         return self.view_of_sensor(self.session.active_sensor) or (self.visible_views() or [None])[0]
+
+    def context_target(self, kind: str):
+        """The ``kind`` widget a context-menu item acts on: the one right-clicked, else the first shown."""
+        w = self.context_widget
+        if w is not None and w.isVisibleTo(self) and self.kinds[max(self.slot_of(w), 0)] == kind:
+            return w
+        shown = self.charts(kind)
+        return shown[0] if shown else None
 
     def keyPressEvent(self, ev) -> None:  # Esc leaves Add/Edit Target Track mode
         if ev.key() == Qt.Key.Key_Escape and self.session.click_mode:

@@ -44,6 +44,8 @@ from ..core.points import POINT_FIELDS, Point, field_shape
 from ..core.project import MediaRef, Project, SensorInfo, Stick
 from ..core.properties import Properties
 from ..core.rig import CameraRig
+from ..core.stabilize import Stabilization
+from ..core.rom_ops import rom_tools_json, set_saved_rom_tools
 
 MAGIC = b"CARAPOST"
 FORMAT_VERSION = 1
@@ -223,6 +225,7 @@ def _manifest(project: Project, w: _ArrayWriter, folder: Path) -> dict:
         "labels": project.labels,
         "sticks": [[s.a, s.b, list(s.color)] for s in project.sticks],
         "rom_path": project.rom_path,
+        "rom_tools": rom_tools_json(project),
         "active_range": list(project.active_range),
         "view_range": list(project.view_range),
         "channel_selection": project.channel_selection,
@@ -232,7 +235,18 @@ def _manifest(project: Project, w: _ArrayWriter, folder: Path) -> dict:
         "detections": detections,
         "rig": rig,
         "brim": project.brim.to_json() if project.brim is not None else None,
+        "stabilization": _stabilization_json(project.stabilization, w),
     }
+
+
+def _stabilization_json(s: Stabilization | None, w: _ArrayWriter) -> dict | None:
+    if s is None:
+        return None
+    return {"transforms": w.put(np.ascontiguousarray(s.transforms, np.float64)), "method": s.method,
+            "base_frame": int(s.base_frame), "frame_range": [int(x) for x in s.frame_range],
+            "point_ids": [int(x) for x in s.point_ids], "usage": [float(x) for x in s.usage],
+            "errors": {k: float(v) for k, v in s.errors.items()}, "parameters": dict(s.parameters),
+            "alignment": None if s.alignment is None else np.asarray(s.alignment, float).ravel().tolist()}
 
 
 # ------------------------------------------------------------------------ load
@@ -320,6 +334,7 @@ def load_project(path: str | Path) -> Project:
         project.labels = list(m.get("labels", []))
         project.sticks = [Stick(int(a), int(b), tuple(c)) for a, b, c in m.get("sticks", [])]
         project.rom_path = m.get("rom_path", "")
+        set_saved_rom_tools(project, m.get("rom_tools"))
         project.active_range = tuple(m["active_range"])
         project.view_range = tuple(m["view_range"])
         project.channel_selection = list(m.get("channel_selection", []))
@@ -353,6 +368,16 @@ def load_project(path: str | Path) -> Project:
                                     arr(r["quat"]), arr(r["position"]), arr(r["solved"]))
         if m.get("brim"):
             project.brim = Brim.from_json(m["brim"])
+        if m.get("stabilization"):
+            d = m["stabilization"]
+            t = np.array(arr(d["transforms"]), np.float64)
+            if t.shape != (F, 3, 4):
+                raise CaraError(f"the file is corrupt (stabilization transforms have shape {t.shape})", path)
+            project.stabilization = Stabilization(
+                t, str(d["method"]), int(d["base_frame"]), tuple(int(x) for x in d["frame_range"]),
+                np.asarray(d["point_ids"], np.int64), np.asarray(d["usage"], np.float32),
+                {k: float(v) for k, v in d["errors"].items()}, dict(d.get("parameters", {})),
+                None if d.get("alignment") is None else np.asarray(d["alignment"], np.float64).reshape(3, 4))
     except CaraError:
         raise
     except (KeyError, TypeError, ValueError, IndexError) as e:

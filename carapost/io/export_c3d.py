@@ -5,8 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.points import BRIM, SRC_NONE, ST_INTERPOLATED, ST_NONE, ST_SINGLE
+from ..core.points import BRIM, SRC_NONE, ST_INTERPOLATED, ST_NONE, ST_SINGLE, Point
 from ..core.project import Project
+from ..core.stabilize_ops import stabilize_array
 from .c3d import write_c3d
 
 
@@ -30,8 +31,7 @@ def project_c3d_arrays(project: Project, start: int = 0, end: int | None = None)
     props = project.properties
     end = project.frame_count - 1 if end is None else end
     sl = slice(start, end + 1)
-    pts = [p for p in project.points.values()
-           if props.export.include_brim_points or p.kind != BRIM]
+    pts = exported_points(project)
     F = end - start + 1
     pos = np.full((F, len(pts), 3), np.nan)
     res = np.zeros((F, len(pts)))
@@ -49,11 +49,28 @@ def project_c3d_arrays(project: Project, start: int = 0, end: int | None = None)
         contributing = (p.src[sl][:, :len(bits)] != SRC_NONE)
         m = (contributing * bits).sum(axis=1).astype(np.uint8)
         masks[measured, j] = m[measured]
+    if props.export.use_stabilized_data and project.stabilization is not None:
+        # Stabilised (and aligned) positions; frames the stabilisation does not cover are missing.
+        pos = stabilize_array(project, pos, start)
+        gone = ~np.isfinite(pos).all(axis=2)
+        res[gone] = 0.0
+        masks[gone] = 0
     return pos, res, masks, [p.name for p in pts]
+
+
+def exported_points(project: Project) -> list[Point]:
+    """The points an export writes, in project order (brim points unless ``export.include_brim_points`` is off)."""
+    keep_brim = project.properties.export.include_brim_points
+    return [p for p in project.points.values() if keep_brim or p.kind != BRIM]
+
+
+def export_range(project: Project) -> tuple[int, int]:
+    """First and last frame an export writes: the active range with ``export.active_range_only``, else the take."""
+    return project.active_range if project.properties.export.active_range_only else (0, project.frame_count - 1)
 
 
 def export_c3d(project: Project, path: str | Path) -> None:
     """Write the project's points to ``path`` (atomic), honouring the Export properties."""
-    start, end = project.active_range if project.properties.export.active_range_only else (0, project.frame_count - 1)
+    start, end = export_range(project)
     pos, res, masks, labels = project_c3d_arrays(project, start, end)
     write_c3d(path, pos, labels, project.frame_rate, residuals=res, camera_masks=masks, first_frame=start + 1)

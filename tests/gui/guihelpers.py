@@ -144,3 +144,23 @@ def drag_raw(qtbot, view, a, b, mods=Qt.KeyboardModifier.NoModifier, button=Qt.M
                          button, mods)
         QApplication.sendEvent(vp, ev)
     QTest.mouseRelease(vp, button, mods, view.raw_to_viewport(*b))
+
+
+def drag_widget(widget, points, mods=Qt.KeyboardModifier.NoModifier, button=Qt.MouseButton.LeftButton):
+    """Press ``button`` at the first widget position of ``points``, move through the others, release at the last.
+
+    Moves carry ``mods`` and the held button, as a user's do (``QTest.mouseMove`` sends neither).
+    """
+    from PySide6.QtCore import QEvent, QPoint, QPointF
+    from PySide6.QtGui import QMouseEvent
+    from PySide6.QtTest import QTest
+    from PySide6.QtWidgets import QApplication
+
+    pts = [QPoint(int(round(x)), int(round(y))) for x, y in points]
+    QTest.mousePress(widget, button, mods, pts[0])
+    for q in pts[1:]:
+        local = QPointF(q)
+        ev = QMouseEvent(QEvent.Type.MouseMove, local, QPointF(widget.mapToGlobal(q)), Qt.MouseButton.NoButton,
+                         button, mods)
+        QApplication.sendEvent(widget, ev)
+    QTest.mouseRelease(widget, button, mods, pts[-1])

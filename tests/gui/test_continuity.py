@@ -65,7 +65,7 @@ def test_view_menu_switches_slot_to_continuity_graph_and_back(qtbot, win):
     assert {"View", "Collapse All", "Expand All", "Fit To Data"} <= set(titles)
     view_menu = next(a.menu() for a in menu.actions() if a.text() == "View")
     three_d = next(a for a in view_menu.actions() if a.text() == "3D")
-    assert not three_d.isEnabled()
+    assert three_d.isEnabled()
     graph = _switch(grid, 2, "Graph")
     assert isinstance(graph, GraphView) and graph.isVisible()
     titles = [a.text() for a in grid.build_context_menu(graph).actions()]

@@ -6,10 +6,11 @@ The four steps of the guide's "Blob detection algorithm":
    (:mod:`.features`);
 2. the classifier — probability that the candidate is a blob centre
    (:mod:`.model`); candidates below the threshold are dropped;
-3. the boundary — the half-contrast iso-line of a soft-edged ellipse fitted in
-   a window scaled to the blob (:mod:`.fit`);
-4. the ellipse — centre, axes and angle of that boundary; then the size filter
-   on the longest axis and removal of duplicates found on two octaves.
+3. the boundary and centre — the half-contrast "inside" map of each candidate's
+   window and its sub-pixel centre, closed form (:mod:`.centre`);
+4. the ellipse — axes and angle from the second moments of that map; stage 2 of
+   the classifier scores the result; then the size filter on the longest axis
+   and removal of duplicates found on two octaves.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import numpy as np
 from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from . import features as fe
-from .fit import ellipse_axes, extract, fit_ellipses
+from .centre import BORDER, MEASURE_NAMES, WINDOWS, extract, measure, window_for
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
 
@@ -99,115 +100,37 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
                       fe.profile_radius(F) * 2.0 ** lv, noise, F), bright
 
 
-#: Fit window half-sizes (pixels of the fit level); windows are grouped so each group is one batched fit.
-_WINDOWS = (7, 10, 14)
-#: Largest blob radius fitted at a level's full resolution; larger blobs go one octave down.
-_MAX_FIT_RADIUS = 9.0
-#: Radius big blobs are brought to (by pyramid levels) for fitting.
-_COARSE_FIT_RADIUS = 6.0
+def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float):
+    """Steps 3-4: centre and ellipse of each candidate; returns full-resolution (x, y, major, minor, angle, ok, extra).
 
-
-def _plan(r0: np.ndarray):
-    """Fit level and window half-size for blobs of initial radius ``r0`` (full-res px).
-
-    Small blobs are fitted at full resolution (their centre accuracy matters
-    most); larger ones an octave down per doubling, which keeps every window
-    at 29x29 pixels or less while their long edges keep the centre accurate.
-    """
-    f = np.maximum(0, np.ceil(np.log2(np.maximum(r0, 1e-3) / _MAX_FIT_RADIUS))).astype(int)
-    # Big blobs (rare, long edges) are fitted small at a coarser level: fewer, cheaper windows.
-    f = np.where(f > 0, np.ceil(np.log2(np.maximum(r0, 1e-3) / _COARSE_FIT_RADIUS)).astype(int), f)
-    rf = r0 / 2.0 ** f
-    need = np.ceil(rf + 5.0)   # the fit's window reaches 4 px beyond the edge
-    wins = np.asarray(_WINDOWS)
-    k = np.minimum(np.searchsorted(wins, need), len(wins) - 1)
-    return f, wins[k]
-
-
-def _fit_group(imgs, x, y, r0, f, h):
-    """One batched fit of blobs sharing fit level ``f`` and window ``h``."""
-    sc = 2.0 ** f
-    img = imgs[f]
-    # Each level is padded once (by the largest window) and shared by all its groups.
-    hp = _WINDOWS[-1]
-    key = ("pad", f)
-    if key not in imgs:
-        imgs[key] = cv2.copyMakeBorder(img, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
-    pad = imgs[key]
-    # Full-resolution pixel centre x maps to (x + 0.5) / sc - 0.5 on level f.
-    fx, fy = (x + 0.5) / sc - 0.5, (y + 0.5) / sc - 0.5
-    ix = np.clip(np.rint(fx).astype(np.int64), 0, img.shape[1] - 1)
-    iy = np.clip(np.rint(fy).astype(np.int64), 0, img.shape[0] - 1)
-    p, good, rms = fit_ellipses(extract(pad, ix + hp, iy + hp, h), r0 / sc)
-    major, minor, ang = ellipse_axes(p)
-    good &= np.isfinite(major) & (major < 2 * h + 1)
-    # Edge width (Gaussian-equivalent sigma, full-res px) of the logistic edge: 1.6 R / k.
-    r_geo = 0.25 * np.sqrt(np.maximum(major * minor, 1e-6)) * sc * 2
-    edge = 1.596 * r_geo / np.maximum(p[:, 7], 1e-3)
-    grad = np.hypot(p[:, 8], p[:, 9]) * r_geo / sc
-    extra = np.stack([edge, p[:, 5], rms, grad, p[:, 7]], 1)
-    return ((ix + p[:, 0] + 0.5) * sc - 0.5, (iy + p[:, 1] + 0.5) * sc - 0.5, major * sc, minor * sc, ang, good,
-            extra)
-
-
-def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray):
-    """Steps 3-4: fit ellipses; returns full-resolution (x, y, major, minor, angle, ok, extra).
-
-    ``extra`` is ``(N, 5)``: edge width (px), contrast, RMS residual, background
-    change across the blob, edge sharpness ``k`` — what stage 2 of the classifier sees.
-
-    Blobs whose fitted size outgrows their window (the radius guess was low)
-    are fitted again with a window planned from the first fit.
+    ``extra`` is ``(N, len(MEASURE_NAMES))`` (:func:`.centre.measure`).  Two rounds:
+    the first from the candidate (coarse-octave candidates start pixels off), the
+    second in a window re-centred on the first answer and sized by its major axis.
     """
     n = len(x)
     out = [np.zeros(n, np.float64) for _ in range(5)]
     ok = np.zeros(n, bool)
-    extra = np.zeros((n, 5))
+    extra = np.zeros((n, len(MEASURE_NAMES)))
     if n == 0:
         return (*out, ok, extra)
-    imgs = {0: bright}
-    x0, y0 = x, y
-    todo = np.arange(n)
-    rr = r0.astype(np.float64)
-    hmax = np.zeros(n)
+    hp = WINDOWS[-1]
+    pad = cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
+    h, w = bright.shape
+    cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
     for _round in range(2):
-        f, h = _plan(rr[todo])
-        for key in sorted(set(zip(f.tolist(), h.tolist()))):
-            sel = todo[(f == key[0]) & (h == key[1])]
-            for lv in range(1, key[0] + 1):
-                if lv not in imgs:
-                    imgs[lv] = cv2.pyrDown(imgs[lv - 1])
-            res = _fit_group(imgs, x[sel], y[sel], rr[sel], *key)
-            for i in range(5):
+        win = window_for(rr)
+        ix = np.clip(np.rint(cx).astype(np.int64), 0, w - 1)
+        iy = np.clip(np.rint(cy).astype(np.int64), 0, h - 1)
+        for hw in np.unique(win).tolist():
+            sel = np.flatnonzero(win == hw)
+            res = measure(extract(pad, ix[sel] + hp, iy[sel] + hp, hw), rr[sel], noise)
+            out[0][sel], out[1][sel] = ix[sel] + res[0], iy[sel] + res[1]
+            for i in (2, 3, 4):
                 out[i][sel] = res[i]
             ok[sel] = res[5]
             extra[sel] = res[6]
-            hmax[sel] = key[1] * 2.0 ** key[0]
-        # Refit (a) blobs too big for their window (edge + 4 px must fit
-        # inside it) and (b) blobs whose centre ended far from the window centre:
-        # coarse-level candidates start up to 2 px off, and an off-centre window
-        # lets the fit settle on a lopsided optimum.
-        t = todo[ok[todo]]
-        off = np.maximum(np.abs(out[0][t] - x[t]), np.abs(out[1][t] - y[t])) * 2.0 ** -_plan(rr[t])[0]
-        again = t[(0.5 * out[2][t] + 5.0 > hmax[t] + 1) | (off > 1.0)]
-        if len(again) == 0:
-            break
-        rr[again] = np.maximum(0.5 * out[2][again], 1.0)
-        x, y = x.copy(), y.copy()
-        x[again], y[again] = out[0][again], out[1][again]
-        todo = again
-    # Fits that diverged (usually a marker touching a brow, hair or another structure
-    # that the window took in) get one more try in the smallest window, from the
-    # candidate itself: less context, but the blob's own edge dominates.
-    failed = np.flatnonzero(~ok & (r0 <= _MAX_FIT_RADIUS))
-    if len(failed):
-        res = _fit_group(imgs, x0[failed], y0[failed], np.minimum(r0[failed], 3.5), 0, _WINDOWS[0])
-        good = res[5]
-        idx = failed[good]
-        for i in range(5):
-            out[i][idx] = res[i][good]
-        ok[idx] = True
-        extra[idx] = res[6][good]
+        cx, cy = np.where(ok, out[0], cx), np.where(ok, out[1], cy)
+        rr = np.where(ok, np.clip(0.5 * out[2], 1.0, WINDOWS[-1] - BORDER), rr)
     return (*out, ok, extra)
 
 
@@ -282,23 +205,28 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     # One blob is usually a candidate on two or three octaves: fit it once, from the
     # finest octave's candidate (closest to the centre; coarse ones start pixels off).
     sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
-    x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel])
-    # The fit may wander to a neighbour: it must stay near the candidate.
+    x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
+                                                         cand.noise)
+    # The centre may wander to a neighbour: it must stay near the candidate.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     ok &= moved <= np.maximum(1.0 * cand.radius[sel], 2.0)
     ok &= minor > 0.5
     h, w = bright.shape
     ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
-    edge, contrast, rms, grad, k = extra.T
+    contrast, line_rms, sharp, border_std, slope, fill, edge_share = extra.T
+    r = np.maximum(0.5 * major, 0.5)
     F = np.zeros((len(sel), len(FIT_FEATURE_NAMES)), np.float32)
     F[:, 0] = np.clip(logit1[sel], -30, 30)
-    F[:, 1] = np.clip(edge, 0, 20)
+    F[:, 1] = np.log(np.clip(contrast, 1e-3, 1e4) / cand.noise)
     F[:, 2] = np.log(np.clip(major, 0.5, 500))
     F[:, 3] = np.clip(minor / np.maximum(major, 1e-6), 0, 1)
-    F[:, 4] = np.log(np.clip(contrast, 1e-3, 1e4) / cand.noise)
-    F[:, 5] = np.clip(rms / np.maximum(contrast, 1e-3), 0, 5)
-    F[:, 6] = np.clip(grad / np.maximum(contrast, 1e-3), 0, 5)
-    F[:, 7] = np.log(np.clip(k, 0.5, 60))
+    F[:, 4] = np.clip(line_rms / r, 0, 5)
+    F[:, 5] = np.log(np.clip(sharp, 1e-3, 10))
+    F[:, 6] = np.clip(border_std / np.maximum(contrast, 1e-3), 0, 5)
+    F[:, 7] = np.clip(slope, 0, 10)
+    F[:, 8] = np.clip(fill, 0, 5)
+    F[:, 9] = np.clip(edge_share, 0, 1)
+    F[:, 10] = np.clip(moved / np.maximum(cand.radius[sel], 1.0), 0, 5)
     return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F)
 
 

@@ -25,8 +25,8 @@ from .features import FEATURE_NAMES
 
 RESOURCE_DIR = Path(__file__).resolve().parents[3] / "resources"
 #: Features of a fitted blob seen by stage 2 (after the stage-1 logit).
-FIT_FEATURE_NAMES = ("s1_logit", "edge_width", "log_major", "axis_ratio", "log_cnr_fit", "residual",
-                     "gradient", "log_k")
+FIT_FEATURE_NAMES = ("s1_logit", "log_cnr", "log_major", "axis_ratio", "line_rms", "log_sharpness",
+                     "border_std", "slope", "fill", "edge_share", "moved")
 #: Stage-1 probability below which a candidate is not fitted at all.
 STAGE1_GATE = 0.15
 

@@ -30,12 +30,15 @@ class SynthImage:
         Semi-axes (a >= b) of those markers, pixels.
     hidden : ndarray (M, 2)
         Centres of markers drawn but mostly occluded (neither required nor false).
+    brim : ndarray (N,) of bool, optional
+        Which of ``centres`` are brim markers (sample-take frames only).
     """
 
     image: np.ndarray
     centres: np.ndarray
     axes: np.ndarray
     hidden: np.ndarray
+    brim: np.ndarray | None = None
 
 
 def _ellipse_coverage(h, w, cx, cy, a, b, ang, ss=4):
@@ -235,3 +238,47 @@ def disc_image(rng, size=41, radius=4.0, blur=1.0, amplitude=100.0, background=6
     s = -1.0 if dark else 1.0
     img = background + s * amplitude * img + rng.normal(0, sigma, img.shape).astype(np.float32)
     return img, np.array(centre)
+
+
+def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int = 40, markers: int = 100,
+                  noise: float | None = None, blur: float | None = None, cameras=(0, 1, 2, 3)) -> list[SynthImage]:
+    """Frames of a ``carapost sample`` take (all its cameras), rendered in memory, with their truth.
+
+    The same renderer as ``carapost sample`` (:mod:`carapost.sample`): a face with
+    painted dots, brows, eyes, lips, hair and the brim with its printed dots, under
+    the helmet's lights.  ``centres`` are the visible markers (face and brim);
+    markers drawn but partly covered are ``hidden`` (neither required nor false).
+
+    Parameters
+    ----------
+    white : bool
+        White markers (on a dark brim) instead of black.
+    seed : int
+        The take's seed (the same as ``carapost sample --seed``).
+    frames, step : int
+        Frames ``0, step, 2 step, ...`` of the take, ``frames`` of them.
+    markers : int
+        Painted face markers.
+    noise, blur : float, optional
+        Sensor noise (grey levels) and optical blur (px); the sample's defaults if omitted.
+    cameras : sequence of int
+        Which of the four cameras.
+    """
+    # Imported here: the renderer is a consumer of the core, not a part of it.
+    from carapost.sample.render import leds_of, render_view
+    from carapost.sample.scene import build_scene, frame_geometry, true_cameras
+
+    kw = {k: float(v) for k, v in (("noise", noise), ("blur", blur)) if v is not None}
+    sc = build_scene(markers=markers, frames=max(1, (frames - 1) * step + 1), seed=seed, white=white, **kw)
+    out = []
+    for f in range(0, frames * step, step):
+        g = frame_geometry(sc, f)
+        cams = true_cameras(sc, f)
+        for c in cameras:
+            img, tr = render_view(sc, g, cams[c], c, f, leds=leds_of(cams))
+            brim = np.zeros(len(tr.uv), bool)
+            brim[len(tr.uv) - sc.n_brim:] = True
+            s = SynthImage(img, tr.uv[tr.visible], tr.axes[tr.visible], tr.uv[tr.drawn & ~tr.visible])
+            s.brim = brim[tr.visible]
+            out.append(s)
+    return out

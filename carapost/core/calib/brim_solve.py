@@ -294,9 +294,10 @@ def _frame_inputs(project, frame):
     return bp, seed_uv, seed_det, det_xy, used
 
 
-def _solution_command(project, frame, sol: BrimSolution, bp, name, calibration: bool):
+def _solution_command(project, frame, sol: BrimSolution, bp, name, calibration: bool, markers=None):
+    # ``markers``: a brim the compound command sets before this one (Initialize from ROM on a take without one).
     S = project.sensor_count
-    markers = project.brim.markers
+    markers = project.brim.markers if markers is None else markers
     new_points, updates = [], []
     next_id = project.next_point_id
     for m in range(len(markers)):

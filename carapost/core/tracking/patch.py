@@ -16,9 +16,10 @@ import numpy as np
 POOL_MIN_JOBS = 8
 
 
-def extract(img: np.ndarray, xy, size: int) -> np.ndarray:
-    """``size`` x ``size`` float32 patch centred (sub-pixel) on raw pixel ``xy``."""
-    return cv2.getRectSubPix(img, (int(size), int(size)), (float(xy[0]), float(xy[1])), patchType=cv2.CV_32F)
+def extract(img: np.ndarray, xy, size) -> np.ndarray:
+    """Float32 patch centred (sub-pixel) on raw pixel ``xy``: ``size`` x ``size``, or ``size = (w, h)``."""
+    w, h = (int(size[0]), int(size[1])) if isinstance(size, tuple) else (int(size), int(size))
+    return cv2.getRectSubPix(img, (w, h), (float(xy[0]), float(xy[1])), patchType=cv2.CV_32F)
 
 
 def ncc(a: np.ndarray, b: np.ndarray) -> float:
@@ -41,7 +42,15 @@ def _subpixel(res: np.ndarray, i: int, j: int) -> tuple[float, float]:
         return 0.5 * (a - c) / den if abs(den) > 1e-9 else 0.0
     dy = vertex(res[i - 1, j], res[i, j], res[i + 1, j]) if 0 < i < res.shape[0] - 1 else 0.0
     dx = vertex(res[i, j - 1], res[i, j], res[i, j + 1]) if 0 < j < res.shape[1] - 1 else 0.0
-    return float(np.clip(dx, -0.5, 0.5)), float(np.clip(dy, -0.5, 0.5))
+    # min/max: np.clip on scalars costs ~10 us, a third of a small match
+    return min(0.5, max(-0.5, float(dx))), min(0.5, max(-0.5, float(dy)))
+
+
+def peak(res: np.ndarray) -> tuple[float, float, float]:
+    """Sub-pixel ``(x, y)`` (column, row of ``res``) and value of the maximum of a correlation map."""
+    i, j = np.unravel_index(int(np.argmax(res)), res.shape)
+    dx, dy = _subpixel(res, i, j)
+    return j + dx, i + dy, float(res[i, j])
 
 
 def track_patch(prev_img, prev_xy, img, pred_xy, radius: float, size: int) -> tuple[np.ndarray, float]:
