@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from . import elastic, patch
 from .assign import candidates, mutual_best, size_change
-from .geometry import RigState, refine_poses, reprojection, triangulate
+from .geometry import RigState, held_out_errors, refine_poses, reprojection, triangulate
 from .params import TrackingParams
 
 #: Pass 1 accepts a match when the next candidate is this many times farther (ratio test).
@@ -427,16 +427,7 @@ class FrameTracker:
         if len(rows):
             # Hold out each view in turn: the wrong one is the view the others agree least with
             # (not the one with the largest residual, which a wrong view may push onto a good one).
-            held = np.full((len(rows), self.S), -1.0)
-            Xs = np.full((len(rows), self.S, 3), np.nan)
-            for s in range(self.S):
-                has = np.flatnonzero(valid[rows, s])
-                if len(has) == 0:
-                    continue
-                v = valid[rows[has]].copy()
-                v[:, s] = False
-                Xs[has, s] = triangulate(rig, uv_c[rows[has]], v)
-                held[has, s] = np.linalg.norm(rig.project(Xs[has, s])[:, s] - uv_c[rows[has], s], axis=1)
+            held, Xs = held_out_errors(rig, uv_c[rows], valid[rows])
             worst = np.argmax(held, axis=1)
             e = held[np.arange(len(rows)), worst]
             Xo = Xs[np.arange(len(rows)), worst]

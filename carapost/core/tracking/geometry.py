@@ -82,6 +82,42 @@ class RigState:
         return self.C[s], d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
+def _view_equations(P: np.ndarray, uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each view's share of the weighted DLT normal equations: ``(n, S, 3, 3)`` and ``(n, S, 3)``.
+
+    The rows of view s are u P3 - P1 and v P3 - P2, scaled by ``w[:, s]``.
+    """
+    A = uv[..., :, None] * P[None, :, 2:3, :] - P[None, :, :2, :]          # (n, S, 2, 4)
+    A = A * w[..., None, None]
+    at = np.swapaxes(A[..., :3], -1, -2)                                      # (n, S, 3, 2)
+    return at @ A[..., :3], -(at @ A[..., 3:])[..., 0]
+
+
+def _solve3(M: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve batched symmetric 3x3 systems ``M x = b`` by the adjugate (LAPACK costs more for tiny systems)."""
+    m00, m01, m02 = M[..., 0, 0], M[..., 0, 1], M[..., 0, 2]
+    m11, m12, m22 = M[..., 1, 1], M[..., 1, 2], M[..., 2, 2]
+    c00 = m11 * m22 - m12 * m12
+    c01 = m02 * m12 - m01 * m22
+    c02 = m01 * m12 - m02 * m11
+    c11 = m00 * m22 - m02 * m02
+    c12 = m01 * m02 - m00 * m12
+    c22 = m00 * m11 - m01 * m01
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    x = np.stack([c00 * b0 + c01 * b1 + c02 * b2,
+                  c01 * b0 + c11 * b1 + c12 * b2,
+                  c02 * b0 + c12 * b1 + c22 * b2], axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x /= det[..., None]
+    return np.where(np.abs(det)[..., None] > 1e-300, x, np.nan)
+
+
+def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
+    depth = X @ P[:, 2, :3].T + P[:, 2, 3]
+    return np.where(v, 1.0 / np.maximum(np.abs(depth), 1e-3), 0.0) * 100.0
+
+
 def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Batched triangulation in corrected pixels.
 
@@ -108,20 +144,42 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarra
     P = rig.P()
     v = valid[ok]
     uv = np.where(v[..., None], uv_c[ok], 0.0)
-    # Rows u P3 - P1 and v P3 - P2: (n, S, 2, 4).
-    A = uv[..., :, None] * P[None, :, 2:3, :] - P[None, :, :2, :]
     w = v.astype(float)
-    X = None
     for _ in range(2):
-        Aw = (A * w[..., None, None]).reshape(len(uv), -1, 4)
-        At = Aw[..., :3].transpose(0, 2, 1)
-        M = At @ Aw[..., :3]
-        b = -(At @ Aw[..., 3:])
-        X = np.linalg.solve(M + 1e-12 * np.eye(3), b)[..., 0]
-        depth = X @ P[:, 2, :3].T + P[:, 2, 3]
-        w = np.where(v, 1.0 / np.maximum(np.abs(depth), 1e-3), 0.0) * 100.0
+        M, b = _view_equations(P, uv, w)
+        X = _solve3(M.sum(1), b.sum(1))
+        w = _depth_weights(P, X, v)
     out[ok] = X
     return out
+
+
+def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each view's error against the point triangulated from the other views.
+
+    Parameters
+    ----------
+    uv_c : ndarray (N, S, 2)
+    valid : ndarray (N, S) bool
+        Rows need 3+ valid views.
+
+    Returns
+    -------
+    err : ndarray (N, S)
+        Distance (px) from each valid view's sample to the projection of the
+        point the other views give; -1 where not valid.
+    X : ndarray (N, S, 3)
+        Those leave-one-out points.
+    """
+    P = rig.P()
+    uv = np.where(valid[..., None], uv_c, 0.0)
+    X = triangulate(rig, uv_c, valid)
+    w = _depth_weights(P, X, valid)
+    M, b = _view_equations(P, uv, w)
+    Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)             # (N, S, 3) without view s
+    S = valid.shape[1]
+    proj = np.stack([rig.project(Xs[:, s])[:, s] for s in range(S)], axis=1)
+    err = np.where(valid, np.linalg.norm(proj - uv_c, axis=-1), -1.0)
+    return np.nan_to_num(err, nan=-1.0), Xs
 
 
 def reprojection(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
