@@ -84,7 +84,6 @@ class ProgressBar:
         self.width = width
         self.t0 = time.monotonic()
         self.failed = 0
-        self.running = 0
 
     def start(self, to_run: int, total: int) -> None:
         skipped = total - to_run

@@ -46,7 +46,7 @@ def test_local_batch_writes_every_take_then_skips_them(tmp_path, rendered, capsy
     rc, err = run_cli(capsys, tmp_path, "--pipeline", pfile, "--workers", 2)
     assert rc == 0, err
     assert "3 done, 0 up to date, 0 failed" in err
-    stamps = {}
+    stamps, pids = {}, set()
     for name in names:
         cara, c3d = tmp_path / name / f"{name}.cara", tmp_path / name / f"{name}.c3d"
         project = load_project(cara)
@@ -55,8 +55,10 @@ def test_local_batch_writes_every_take_then_skips_them(tmp_path, rendered, capsy
         assert read_c3d(c3d).positions.shape[:2] == (4, len(project.points))
         manifest = json.loads((tmp_path / name / f"{name}.batch.json").read_text())
         assert manifest["status"] == "ok" and manifest["steps"][2] == "detect_blobs"
+        pids.add(manifest["pid"])
         stamps[name] = (cara.stat().st_mtime_ns, c3d.stat().st_mtime_ns)
     assert not list(tmp_path.rglob("*.tmp*"))          # outputs were renamed into place
+    assert len(pids) == 2 and os.getpid() not in pids  # two worker processes shared the takes
 
     rc, err = run_cli(capsys, tmp_path, "--pipeline", pfile, "--workers", 2)
     assert rc == 0 and "0 to run, 3 up to date" in err
@@ -67,6 +69,7 @@ def test_local_batch_writes_every_take_then_skips_them(tmp_path, rendered, capsy
     # A newer input (new seeds for TakeB) or a changed pipeline makes a take due again.
     seeds = tmp_path / "TakeB" / "seeds.json"
     os.utime(seeds, ns=(seeds.stat().st_atime_ns, stamps["TakeB"][0] + 10**9))
+
     def due(overrides=None):
         return [j.take for j in plan_batch(find_takes([tmp_path]), load_pipeline(pfile), overrides)
                 if not is_up_to_date(j)]
@@ -133,6 +136,8 @@ def test_unreachable_scheduler_is_a_bad_argument(tmp_path, rendered, capsys):
     ({"steps": [{"import_xcp": "missing.xcp"}]}, "steps[0]: no such file"),
     ({"steps": ["detect_blobs"], "outputs": {"cara": "all.cara"}, "output_dir": "out"},
      "would be written by take 'TakeA' and take 'TakeB'"),
+    ({"steps": [{"import_xcp": "calibration.xcp"}], "outputs": {"xcp": "calibration.xcp"}},
+     "is an input of take 'TakeA'"),
 ])
 def test_a_bad_pipeline_exits_2_naming_the_file(tmp_path, rendered, capsys, pipeline, message):
     pfile = make_batch(tmp_path, rendered, ["TakeA", "TakeB"], pipeline)
@@ -174,3 +179,38 @@ def test_inputs_resolve_beside_the_take_then_beside_the_pipeline(tmp_path, rende
     assert j.properties == {"blob.black_threshold": 0.2}
     assert str(tmp_path / "takes" / "T2" / "seeds.json") in j.inputs and len(j.inputs) == 6
     assert re.fullmatch(r"[0-9a-f]{16}", j.fingerprint)
+
+
+def test_relative_takes_write_beside_the_take_whatever_the_pipeline_folder(tmp_path, rendered, monkeypatch):
+    copy_take(rendered, tmp_path / "takes" / "T1", "T1", extra=())
+    (tmp_path / "pipelines").mkdir()
+    (tmp_path / "pipelines" / "blobs.json").write_text(json.dumps(BLOBS))
+    monkeypatch.chdir(tmp_path / "takes")
+    job, = plan_batch(find_takes(["T1"]), load_pipeline("../pipelines/blobs.json"))
+    assert job.outputs == {"cara": str(tmp_path / "takes" / "T1" / "T1_b.cara")}
+    assert job.input == str(tmp_path / "takes" / "T1" / "T1_0.pico")
+
+
+def test_progress_is_a_bar_on_a_terminal_and_lines_otherwise():
+    import io
+
+    from carapost.api.batch import TakeResult
+    from carapost.batch_cli import ProgressBar
+
+    results = [TakeResult("A", "/d/A_0.pico", "skipped"), TakeResult("B", "/d/B_0.pico", "ok", seconds=2.5),
+               TakeResult("C", "/d/C_0.pico", "failed", "open: not a .pico file: only 7 bytes")]
+    plain, tty = io.StringIO(), io.StringIO()
+    for stream, is_tty in ((plain, False), (tty, True)):
+        bar = ProgressBar(stream, tty=is_tty)
+        bar.start(2, 3)
+        for i, r in enumerate(results, 1):
+            bar.update(r, i, 3)
+        bar.finish()
+    assert plain.getvalue().splitlines() == [
+        "batch: 3 takes, 2 to run, 1 up to date", "[1/3] up to date A", "[2/3] done B (2.5 s)",
+        "[3/3] FAILED /d/C_0.pico: open: not a .pico file: only 7 bytes"]
+    assert "\x1b" not in plain.getvalue() and "\r" not in plain.getvalue()
+    shown = tty.getvalue()
+    assert "up to date A" not in shown                       # counted on the first line instead
+    assert "[####################..........] 2/3 takes" in shown
+    assert "[##############################] 3/3 takes, 1 failed" in shown

@@ -73,28 +73,42 @@ class TakeResult:
                    dict(d.get("outputs", {})), int(d.get("warnings", 0)))
 
 
-def run_take(job: dict) -> dict:
+def run_take(job: dict, single_threaded: bool = False) -> dict:
     """Run one take's pipeline and write its outputs and manifest; never raises.
 
-    The function a worker process (or a Dask worker) runs.  ``job`` is
-    :meth:`Job.to_dict`.  Returns :class:`TakeResult` fields as a dict; a
-    failure is ``status="failed"`` with a one-line ``error`` (the manifest also
-    keeps the traceback).  Log warnings go to the manifest, not to the
-    terminal, where several workers would interleave them.
+    The function a worker process (or a Dask worker) runs.  Log messages go to
+    the manifest, not to the terminal, where several workers would interleave
+    them.
+
+    Parameters
+    ----------
+    job : dict
+        :meth:`Job.to_dict`.
+    single_threaded : bool
+        Limit OpenCV (and BLAS, where not yet loaded) to one thread in this
+        process first, as a batch worker should.
+
+    Returns
+    -------
+    dict
+        :class:`TakeResult` fields; a failure is ``status="failed"`` with a
+        one-line ``error`` (the manifest also keeps the traceback).
     """
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%S")
     status, error, tb = "ok", "", ""
     at = ["open"]
-    _limit_threads()
+    if single_threaded:
+        _limit_threads()
     with _captured_log() as messages:
         try:
             _run_steps(job, at)
         except Exception as e:  # noqa: BLE001 - a take's failure must not stop the batch
             status, error, tb = "failed", _one_line(e, at[0], job["input"]), traceback.format_exc()
     seconds = round(time.perf_counter() - t0, 3)
+    warnings = sum(not m.startswith("info:") for m in messages)
     result = {"take": job["take"], "input": job["input"], "status": status, "error": error, "seconds": seconds,
-              "outputs": job["outputs"], "warnings": len(messages)}
+              "outputs": job["outputs"], "warnings": warnings}
     manifest = dict(result, fingerprint=job["fingerprint"], inputs=job["inputs"], started=started,
                     finished=time.strftime("%Y-%m-%dT%H:%M:%S"), host=socket.gethostname(), pid=os.getpid(),
                     steps=[s["step"] for s in job["steps"]], properties=job["properties"], log=messages)
@@ -126,7 +140,7 @@ def _run_steps(job: dict, at: list[str]) -> None:
 
 @contextlib.contextmanager
 def _captured_log():
-    """Collect the ``carapost`` logger's warnings and errors in a list instead of printing them."""
+    """Collect the ``carapost`` logger's messages (info and up) in a list instead of printing them."""
     import logging
 
     messages: list[str] = []
@@ -136,15 +150,17 @@ def _captured_log():
             messages.append(f"{record.levelname.lower()}: {record.getMessage()}")
 
     logger = logging.getLogger("carapost")
-    handler = ToList(logging.WARNING)
-    saved = logger.propagate
+    saved = logger.propagate, logger.level
+    handler = ToList(logging.INFO)
     logger.addHandler(handler)
     logger.propagate = False
+    logger.setLevel(min(logger.getEffectiveLevel(), logging.INFO))
     try:
         yield messages
     finally:
         logger.removeHandler(handler)
-        logger.propagate = saved
+        logger.propagate, level = saved
+        logger.setLevel(level)
 
 
 def _one_line(e: BaseException, step: str, input_path: str = "") -> str:
@@ -200,11 +216,13 @@ def _step_track(proc, s, state) -> None:
 
 
 def _step_interpolate_gaps(proc, s, state) -> None:
+    import logging
+
     try:
         proc.interpolate_gaps()
     except CaraError as e:
         # Nothing to fill (no gaps, no points) is not a failure of the take.
-        state.setdefault("notes", []).append(str(e))
+        logging.getLogger("carapost").info(f"Interpolate Gaps: {e}")
 
 
 _STEPS: dict[str, Callable] = {
@@ -359,7 +377,7 @@ def _run_pool(jobs: list[Job], workers: int, report: Callable[[TakeResult], None
 
     crashed: list[Job] = []
     with _single_threaded_children():
-        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_limit_threads)
         try:
             pending = {pool.submit(run_take, job.to_dict()): job for job in jobs}
             while pending:
@@ -392,7 +410,7 @@ def _run_dask(jobs: list[Job], address: str, report: Callable[[TakeResult], None
         token = hashlib.sha1(f"{time.time()}{os.getpid()}".encode()).hexdigest()[:8]
         futures, by_key = [], {}
         for i, job in enumerate(jobs):
-            fut = client.submit(run_take, job.to_dict(), key=f"carapost-batch-{token}-{i}-{job.take}",
+            fut = client.submit(run_take, job.to_dict(), True, key=f"carapost-batch-{token}-{i}-{job.take}",
                                 pure=False, retries=0)
             futures.append(fut)
             by_key[fut.key] = job

@@ -304,28 +304,29 @@ def plan_batch(takes: list[Take], pipeline: Pipeline, overrides: dict[str, Any] 
     """
     props = dict(pipeline.properties)
     props.update(overrides or {})
-    base = pipeline.path.parent if pipeline.path is not None else Path.cwd()
+    base = pipeline.path.resolve().parent if pipeline.path is not None else Path.cwd()
     jobs: list[Job] = []
     owners: dict[Path, str] = {}
     for take in takes:
-        fields = {"take": take.name, "take_dir": str(take.folder), "pipeline_dir": str(base)}
+        folder = take.folder.resolve()
+        fields = {"take": take.name, "take_dir": str(folder), "pipeline_dir": str(base)}
         steps, inputs = [], [str(f.resolve()) for f in take.files]
         for s in pipeline.steps:
             s = dict(s)
             key = _PATH_STEPS.get(s["step"])
             if key and not (s["step"] == "set_brim" and s[key] in _DEFAULT_BRIMS):
-                s[key] = str(_resolve_input(s[key], fields, take.folder, base, pipeline.path, s["index"]))
+                s[key] = str(_resolve_input(s[key], fields, folder, base, pipeline.path, s["index"]))
                 inputs.append(s[key])
             steps.append(s)
-        out_dir = Path(_format(pipeline.output_dir, fields)) if pipeline.output_dir else take.folder
-        if not out_dir.is_absolute():
-            out_dir = base / out_dir
+        out_dir = base / _format(pipeline.output_dir, fields) if pipeline.output_dir else folder
         outputs = {}
         for kind, name in pipeline.outputs.items():
             out = (out_dir / _format(name, fields)).resolve()
-            clash = owners.get(out) or (take.name if str(out) in inputs else None)
-            if clash:
-                raise CaraError(f"outputs.{kind}: {out} would be written by take {clash!r} and take "
+            if str(out) in inputs:
+                raise CaraError(f"outputs.{kind}: {out} is an input of take {take.name!r}; "
+                                f"write the results elsewhere", pipeline.path)
+            if out in owners:
+                raise CaraError(f"outputs.{kind}: {out} would be written by take {owners[out]!r} and take "
                                 f"{take.name!r}; use output_dir or a name with {{take}}", pipeline.path)
             owners[out] = take.name
             outputs[kind] = str(out)
