@@ -7,6 +7,12 @@
 2. Opening a ten-minute take (36,000 frames, 160 points, 4 sensors, 160
    detections per sensor and frame, saved with ``save_project``) in the main
    window, up to its first paint.  Target < 2 s.
+3. Selecting another point by clicking it in a camera view, up to every view
+   repainted (four camera views; again with the 3D view in the fourth slot).
+   Target <= 30 ms.
+4. The 3D view (1280x720, 250 points and their stick mesh, cameras, rays,
+   labels) turning one step per frame, each step rendered with OpenGL, read
+   back and painted.  Target >= 60 frames/s.
 
 The step reports wall time (the target) and this process's CPU time, with
 ``contention``: the wall/CPU ratio of a fixed numpy loop measured in the same
@@ -85,6 +91,78 @@ class _PaintCounter:
             v.viewport().installEventFilter(self.filter)
 
 
+def _select_point(app, win, p, clicks: int = 40) -> list[dict]:
+    """Click point after point in camera view 0: time to every view repainted (4 camera views, then 3 + 3D)."""
+    from PySide6.QtCore import Qt
+    from PySide6.QtTest import QTest
+
+    out = []
+    for name, kind in (("gui_select_point_4_views", "sensor"), ("gui_select_point_3_views_and_3d", "3d")):
+        win.grid.set_slot_kind(3, kind, 3)
+        app.processEvents()
+        view = win.grid.views[0]
+        times, cpu = [], []
+        for i in range(clicks + 5):
+            pid = (i * 37) % len(p.points)
+            pos = view.raw_to_viewport(*p.points[pid].uv[win.session.frame, 0])
+            t, c = time.perf_counter(), time.process_time()
+            QTest.mouseClick(view.viewport(), Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier, pos)
+            app.processEvents()
+            times.append((time.perf_counter() - t) * 1e3)
+            cpu.append((time.process_time() - c) * 1e3)
+            assert win.session.selection.points == [pid]
+        warm, warm_cpu = times[5:], cpu[5:]
+        med = statistics.median(warm)
+        out.append({"benchmark": name, "value": round(med, 2), "unit": "ms", "target": "<= 30",
+                    "pass": med <= 30.0, "p95_ms": round(float(np.percentile(warm, 95)), 2),
+                    "cpu_median_ms": round(statistics.median(warm_cpu), 2),
+                    "load_average": round(os.getloadavg()[0], 2), "contention": round(_contention(), 2),
+                    "points": len(p.points), "clicks": clicks})
+    win.grid.set_slot_kind(3, "sensor", 3)
+    return out
+
+
+def _view3d_fps(app, frames: int, points: int, steps: int) -> dict:
+    """Frames per second of a 1280x720 3D view turning, with ``points`` points and their stick mesh."""
+    from carapost.core.document import Document
+    from carapost.core.editing import create_stick_mesh
+    from carapost.gui.imageloader import ImageLoader
+    from carapost.gui.session import Session
+    from carapost.gui.view3d import View3D
+
+    p = _tracked_take(frames, points)
+    doc = Document(p)
+    doc.run(create_stick_mesh(p, 0))
+    ses = Session(ImageLoader(synchronous=True))
+    ses.set_document(doc)
+    doc.select_points(list(p.points)[:3])            # rays and highlights drawn too
+    v = View3D(ses)
+    v.resize(1280, 720)
+    v.show()
+    app.processEvents()
+    if v.renderer is None:
+        return {"benchmark": "gui_3d_view_fps", "value": None, "unit": "frames/s", "target": ">= 60",
+                "pass": False, "error": v.error}
+    v.repaint()
+    n0 = v.renders
+    t, c = time.perf_counter(), time.process_time()
+    for _ in range(steps):
+        v.camera.orbit(4.0, 0.0)
+        v.refresh()
+        v.repaint()                                  # render, read back and paint now
+    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    drawn = v.renders - n0
+    fps = drawn / wall
+    res = {"benchmark": "gui_3d_view_fps_250_points", "value": round(fps, 1), "unit": "frames/s",
+           "target": ">= 60", "pass": fps >= 60.0 and drawn == steps, "ms_per_frame": round(wall / drawn * 1e3, 2),
+           "cpu_ms_per_frame": round(cpu / drawn * 1e3, 2), "size_px": [v.width(), v.height()],
+           "points": points, "sticks": len(p.sticks), "gl_renderer": v.renderer.gl_renderer,
+           "load_average": round(os.getloadavg()[0], 2)}
+    v.close()
+    v.deleteLater()
+    return res
+
+
 def run(quick: bool = False) -> list[dict]:
     from PySide6.QtCore import QSettings
 
@@ -137,8 +215,10 @@ def run(quick: bool = False) -> list[dict]:
                     "views": len(views),
                     "view_size_px": [views[0].width(), views[0].height()],
                     "paints_per_step": round(counter.n / steps, 2), "steps": len(warm)})
+        out += _select_point(app, win, p)
         win.session.doc.stack.mark_clean()
         win.close()
+        out.append(_view3d_fps(app, frames=10 if quick else 30, points=250, steps=60 if quick else 240))
 
         # ---------------------------------------------------------------- opening
         big_frames = 3600 if quick else 36_000

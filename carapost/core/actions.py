@@ -191,7 +191,8 @@ ACTIONS: tuple[Action, ...] = (
     # ------------------------------------------------------------------ View
     # View > Panels items are built from the docks (one per pane), see PANELS.
     _A("view.new_workspace", "View", "New Floating Workspace", "", "views.new_workspace", "project",
-       "A floating window with its own camera views.", separator_before=True, while_busy=True),
+       "A floating window with the workspace's views (the 3D view first).", separator_before=True,
+       while_busy=True),
     _A("view.show_brim_svg", "View", "Show Calibration Brim SVG", "", "views.show_brim_svg", "brim_svg",
        "Show the imported calibration brim SVG.", while_busy=True),
     _A("view.full_screen", "View", "Full Screen", "F", "views.full_screen", "always",

@@ -262,7 +262,7 @@ class CameraView(pg.GraphicsView):
         for it in self.stick_items.values():
             it.clear()
         if p is None or fd is None or self.sensor >= p.sensor_count:
-            self.labels.set_labels(np.zeros((0, 2)), [], [], 10, QRectF())
+            self.labels.set_labels(np.zeros((0, 2)), [], [], 10, self._bounds)
             self._update_info()
             return
         s, f, d = self.sensor, ses.frame, ses.display
@@ -383,17 +383,17 @@ class CameraView(pg.GraphicsView):
         rows = [r for r in rows if r >= 0]
         sxy = xy[rows] if rows else np.zeros((0, 2))
         ok = finite(sxy)
-        self._set_tight("selected", circles(sxy[ok, 0], sxy[ok, 1], SELECT_R * px), px)
-        self._set_tight("selected_sticks", self._stick_segments(p, fd, sel.sticks), px)
+        self.items["selected"].set_shapes(circles(sxy[ok, 0], sxy[ok, 1], SELECT_R * px))
+        self.items["selected_sticks"].set_shapes(self._stick_segments(p, fd, sel.sticks))
         rec = p.detections[s].frame(f)
         dsel = [i for (ds, df, i) in sel.detections if ds == s and df == f and i < len(rec)]
         if dsel:
             r = rec[dsel]
-            self._set_tight("selected_detections", ellipses(
+            self.items["selected_detections"].set_shapes(ellipses(
                 r["x"].astype(float), r["y"].astype(float), r["major"].astype(float) / 2 + 3 * px,
-                r["minor"].astype(float) / 2 + 3 * px, r["angle"].astype(float)), px)
+                r["minor"].astype(float) / 2 + 3 * px, r["angle"].astype(float)))
         else:
-            self._set_tight("selected_detections", combine(), px)
+            self.items["selected_detections"].clear()
         hover_row = -1
         hv = ses.hover
         hover = combine()
@@ -405,7 +405,7 @@ class CameraView(pg.GraphicsView):
             r = rec[hv[1][2]]
             hover = ellipses([float(r["x"])], [float(r["y"])], [float(r["major"]) / 2 + 4 * px],
                              [float(r["minor"]) / 2 + 4 * px], [float(r["angle"])])
-        self._set_tight("hover", hover, px)
+        self.items["hover"].set_shapes(hover)
         if not len(hover[0]):
             self._flash.stop()
             self.items["hover"].setVisible(True)
@@ -419,30 +419,12 @@ class CameraView(pg.GraphicsView):
         want = [r for r in picking.label_rows(props, fd.labels, sel_rows, hover_row) if np.all(np.isfinite(xy[r]))]
         colors = [QColor(255, 255, 255) if r in sel_rows else QColor(0, 255, 255) if r == hover_row
                   else QColor(230, 230, 150) for r in want]
-        texts = [fd.labels[r] for r in want]
-        size = props["display.font_size"]
-        bounds = QRectF()
-        if want:
-            # texts keep their screen size beside the point, in any direction once the view is rotated
-            reach = (max(len(t) for t in texts) * size * 1.4 + 3 * size + 16) * self.pixel_size()
-            lo, hi = np.nanmin(xy[want], axis=0), np.nanmax(xy[want], axis=0)
-            bounds = QRectF(lo[0] - reach, lo[1] - reach, hi[0] - lo[0] + 2 * reach, hi[1] - lo[1] + 2 * reach)
-        self.labels.set_labels(xy[want] if want else np.zeros((0, 2)), texts, colors, size, bounds)
+        self.labels.set_labels(xy[want] if want else np.zeros((0, 2)), [fd.labels[r] for r in want], colors,
+                               props["display.font_size"], self._bounds)
 
-    def _set_tight(self, name: str, segs, px: float) -> None:
-        """Draw a selection layer with bounds around its shapes: a selection change repaints only there."""
-        x0, y0, x1, y1 = segs
-        rect = QRectF()
-        if len(x0):
-            xs, ys = np.concatenate([x0, x1]), np.concatenate([y0, y1])
-            ok = np.isfinite(xs) & np.isfinite(ys)
-            if ok.any():
-                m = 4 * px          # the pen's width and antialiasing
-                lo_x, hi_x, lo_y, hi_y = xs[ok].min(), xs[ok].max(), ys[ok].min(), ys[ok].max()
-                rect = QRectF(lo_x - m, lo_y - m, hi_x - lo_x + 2 * m, hi_y - lo_y + 2 * m)
-        item = self.items[name]
-        item.set_bounds(rect)       # the old bounds are repainted (the shapes leave them) ...
-        item.set_shapes(segs)       # ... and the new ones
+    def refresh_info(self) -> None:
+        """The channel name, mode and pixel report, and the frame's colour (active / selected channel)."""
+        self._update_info()
 
     def _update_info(self) -> None:
         ses = self.session

@@ -88,7 +88,7 @@ class GraphView(pg.PlotWidget):
         s.documentChanged.connect(self.on_document)
         s.projectChanged.connect(self.invalidate)
         s.selectionChanged.connect(self.on_selection)
-        s.frameChanged.connect(lambda f: self.marker.setValue(f))
+        s.frameChanged.connect(self.on_frame)
         self.on_document()
 
     # ------------------------------------------------------------------ state
@@ -111,6 +111,9 @@ class GraphView(pg.PlotWidget):
         self.marker.setValue(self.session.frame)
         self._fit_pending = True
         self.invalidate()
+
+    def on_frame(self, frame: int) -> None:
+        self.marker.setValue(frame)
 
     def on_selection(self) -> None:
         self._fit_pending = True

@@ -208,19 +208,21 @@ class Scene:
         return float(np.linalg.norm(X - centre, axis=1).max())
 
 
-_POINT_VS = """
+_VERTEX_SHADER = """
 #version 330
 uniform mat4 mvp;
 in vec3 in_pos;
 in vec4 in_color;
-in float in_size;
+{size_in}
 out vec4 v_color;
-void main() {
+void main() {{
     gl_Position = mvp * vec4(in_pos, 1.0);
-    gl_PointSize = in_size;
+    {size_out}
     v_color = in_color;
-}
+}}
 """
+_POINT_VS = _VERTEX_SHADER.format(size_in="in float in_size;", size_out="gl_PointSize = in_size;")
+_LINE_VS = _VERTEX_SHADER.format(size_in="", size_out="")
 _POINT_FS = """
 #version 330
 in vec4 v_color;
@@ -231,17 +233,6 @@ void main() {
     if (r2 > 1.0) discard;
     // a darker rim keeps neighbouring dots apart
     f_color = vec4(v_color.rgb * (r2 > 0.72 ? 0.55 : 1.0), v_color.a);
-}
-"""
-_LINE_VS = """
-#version 330
-uniform mat4 mvp;
-in vec3 in_pos;
-in vec4 in_color;
-out vec4 v_color;
-void main() {
-    gl_Position = mvp * vec4(in_pos, 1.0);
-    v_color = in_color;
 }
 """
 _LINE_FS = """

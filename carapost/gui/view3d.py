@@ -49,7 +49,7 @@ def _rgba(rgb, n: int = 1, alpha: float = 1.0) -> np.ndarray:
 
 
 def stabilized_or_raw(session, fd) -> np.ndarray:
-    """The positions the view shows: stabilised when the document's flag asks for them and exist, else raw.
+    """The positions the view shows: stabilised when the document's Show Stabilized is on, else raw.
 
     Returns
     -------
@@ -61,29 +61,19 @@ def stabilized_or_raw(session, fd) -> np.ndarray:
         return fd.pos
     try:
         from ..core.stabilize import stabilized_positions
-    except ImportError:
+    except ImportError:           # a build without stabilisation: raw data
         return fd.pos
-    out = stabilized_positions(session.project, fd.frame)
-    if out is None:
-        return fd.pos
-    if isinstance(out, dict):
-        return np.array([out.get(int(pid), (np.nan,) * 3) for pid in fd.ids], float).reshape(-1, 3)
-    out = np.asarray(out, float).reshape(-1, 3)
-    return out if len(out) == len(fd.ids) else fd.pos
+    out = np.asarray(stabilized_positions(session.project, fd.frame, [int(i) for i in fd.ids]), float)
+    return out.reshape(-1, 3) if out.size == fd.pos.size else fd.pos
 
 
 def rom_positions(session) -> np.ndarray:
-    """Points of the loaded ROM's frame (M, 3); empty when no ROM is loaded (or this build has none)."""
-    doc, p = session.doc, session.project
-    rom = getattr(doc, "rom", None) or getattr(p, "rom", None)
-    if rom is None or not getattr(rom, "points", None):
-        return np.zeros((0, 3))
+    """Points of the loaded ROM's frame (M, 3), as aligned by the ROM Tools; empty without a ROM."""
     try:
-        frame = int(p.properties["initialize_from_rom.rom_frame_index"])
-    except (KeyError, TypeError, ValueError):
-        frame = 0
-    frame = max(0, min(frame, rom.frame_count - 1))
-    X = np.array([pt.pos[frame] for pt in rom.points.values()], float).reshape(-1, 3)
+        from ..core.rom_ops import rom_points_3d
+    except ImportError:           # a build without ROM support
+        return np.zeros((0, 3))
+    X = np.asarray(rom_points_3d(session.project), float).reshape(-1, 3)
     return X[np.all(np.isfinite(X), axis=1)]
 
 
@@ -145,7 +135,7 @@ class View3D(QWidget):
         s = session
         s.documentChanged.connect(self.on_document)
         s.projectChanged.connect(self.refresh)
-        s.frameChanged.connect(lambda _f: self.refresh())
+        s.frameChanged.connect(self.on_frame)
         for sig in (s.selectionChanged, s.hoverChanged, s.displayChanged):
             sig.connect(self.refresh)
         self._listener = _display_listener(self)
@@ -160,6 +150,9 @@ class View3D(QWidget):
         if self._doc is not None:
             self._doc.add_listener(self._listener)
         self._needs_fit = True
+        self.refresh()
+
+    def on_frame(self, _frame: int) -> None:
         self.refresh()
 
     def refresh(self) -> None:

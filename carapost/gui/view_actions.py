@@ -5,7 +5,7 @@ import logging
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import QUrl
+from PySide6.QtCore import Qt, QUrl
 from PySide6.QtGui import QDesktopServices
 from PySide6.QtWidgets import QDockWidget, QVBoxLayout, QWidget
 
@@ -145,7 +145,10 @@ class ViewActions:
 
         win = QWidget(None)
         win.setWindowTitle(f"carapost workspace {len(self.workspaces) + 1}")
+        # closed for good: its views stop listening to the session and free their memory
+        win.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose, True)
         grid = ViewGrid(self.s, self.w.actionset.actions, win)
+        win.destroyed.connect(lambda *_a, w=win, g=grid: self._forget_workspace(w, g))
         grid.on_document()
         grid.set_layout("1")
         grid.set_slot_kind(0, "3d")
@@ -162,6 +165,12 @@ class ViewActions:
         self.grids.append(grid)
         log.info(f"Opened floating workspace {len(self.workspaces)}")
         return win
+
+    def _forget_workspace(self, win, grid) -> None:
+        if win in self.workspaces:
+            self.workspaces.remove(win)
+        if grid in self.grids:
+            self.grids.remove(grid)
 
     def show_brim_svg(self) -> None:
         """Show Calibration Brim SVG."""

@@ -57,6 +57,7 @@ class ViewGrid(QWidget):
         #: the widget (of any kind) last right-clicked, and when (the newest grid's menu is the one in use)
         self.context_widget = None
         self.menu_serial = 0
+        self.open_menu: QMenu | None = None
         bar = QHBoxLayout()
         bar.setContentsMargins(2, 0, 2, 0)
         bar.addWidget(QLabel("Views:"))
@@ -80,7 +81,8 @@ class ViewGrid(QWidget):
             v.contextRequested.connect(self.show_context_menu)
             v.sensorClicked.connect(self.sensorClicked)
             v.targetClicked.connect(self.targetClicked)
-            v.activated.connect(lambda _s: self.refresh_selection())
+            # the click goes on to select: only the views' frames (which one is active) change here
+            v.activated.connect(lambda _s: self.refresh_info())
         lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         lay.setSpacing(2)
@@ -88,7 +90,7 @@ class ViewGrid(QWidget):
         lay.addLayout(self.grid, 1)
         s = session
         s.documentChanged.connect(self.on_document)
-        s.frameChanged.connect(lambda _f: self.refresh())
+        s.frameChanged.connect(self.on_frame)
         s.projectChanged.connect(self.refresh)
         s.displayChanged.connect(self.refresh)
         for sig in (s.selectionChanged, s.hoverChanged, s.modeChanged, s.labelChanged):
@@ -176,6 +178,10 @@ class ViewGrid(QWidget):
         self.set_layout(self.layout_name)
 
     # ---------------------------------------------------------------- redraw
+    # (session signals go to methods, not lambdas: Qt drops those connections when a workspace closes)
+    def on_frame(self, _frame: int) -> None:
+        self.refresh()
+
     def refresh(self) -> None:
         for v in self.visible_views():
             v.refresh()
@@ -183,6 +189,11 @@ class ViewGrid(QWidget):
     def refresh_selection(self) -> None:
         for v in self.visible_views():
             v.refresh_selection()
+
+    def refresh_info(self) -> None:
+        """The views' text and frame colour (active view, selected channels, mode)."""
+        for v in self.visible_views():
+            v.refresh_info()
 
     def on_image(self, sensor: int) -> None:
         for v in self.visible_views():
@@ -244,11 +255,17 @@ class ViewGrid(QWidget):
             group.addAction(a)
             m.addAction(a)
 
-    def show_context_menu(self, view, pos) -> None:
+    def show_context_menu(self, view, pos) -> QMenu:
+        """Open ``view``'s context menu at global ``pos`` (without blocking: it goes away when closed)."""
         self.note_context(view)
-        menu = self.build_context_menu(view)
-        menu.exec(pos)
-        menu.deleteLater()
+        if self.open_menu is not None:
+            self.open_menu.close()
+        menu = self.open_menu = self.build_context_menu(view)
+        # an item's action runs before the menu is deleted: deleteLater waits for the event loop
+        menu.aboutToHide.connect(menu.deleteLater)
+        menu.destroyed.connect(lambda *_a: setattr(self, "open_menu", None))
+        menu.popup(pos)
+        return menu
 
     def note_context(self, view) -> None:
         """Remember ``view`` as the one the context menu's items act on."""

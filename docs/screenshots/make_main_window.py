@@ -55,28 +55,39 @@ def build_project(folder: Path):
     return p, truth
 
 
-def main() -> int:
+def open_take(tmp: Path, size=(1920, 1200), adjust=None):
+    """The take of :func:`build_project` saved in ``tmp`` and opened in a main window (settings kept in ``tmp``).
+
+    ``adjust(project)`` may change the project before it is saved.  Returns ``(app, window)``.
+    """
     from PySide6.QtCore import QSettings
 
-    from carapost.core import editing
-    from carapost.core.edits import SetLabels, SetProperties, SetRange
     from carapost.gui.app import ensure_app, settle
     from carapost.gui.mainwindow import MainWindow
     from carapost.io.cara import save_project
 
     app = ensure_app(offscreen=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        QSettings.setPath(QSettings.Format.IniFormat, QSettings.Scope.UserScope, str(tmp))
-        os.environ["CARAPOST_DATA_DIR"] = str(tmp)
-        project, _truth = build_project(tmp)
-        save_project(project, tmp / "face_take.cara")
+    QSettings.setPath(QSettings.Format.IniFormat, QSettings.Scope.UserScope, str(tmp))
+    os.environ["CARAPOST_DATA_DIR"] = str(tmp)
+    project, _truth = build_project(tmp)
+    if adjust is not None:
+        adjust(project)
+    save_project(project, tmp / "face_take.cara")
+    win = MainWindow(synchronous_images=True, autosave_s=0, restore=False, persist=False)
+    win.resize(*size)
+    win.show()
+    settle(app)
+    assert win.files.open_path(str(tmp / "face_take.cara"))
+    return app, win
 
-        win = MainWindow(synchronous_images=True, autosave_s=0, restore=False, persist=False)
-        win.resize(1920, 1200)
-        win.show()
-        settle(app)
-        assert win.files.open_path(str(tmp / "face_take.cara"))
+
+def main() -> int:
+    from carapost.core import editing
+    from carapost.core.edits import SetLabels, SetProperties, SetRange
+    from carapost.gui.app import settle
+
+    with tempfile.TemporaryDirectory() as tmp:
+        app, win = open_take(Path(tmp))
         ses = win.session
         p = ses.project
         names = ["Nose_Tip", "Nose_Bridge", "Chin", "Brow_L", "Brow_R", "Cheek_L", "Cheek_R", "Lip_Upper",

@@ -114,11 +114,10 @@ def test_3d_display_toggles_change_what_is_drawn(win):
     assert len(v.build_scene().lines) == 3  # the world axes only
 
 
-def test_graph_and_continuity_items_act_on_the_view_right_clicked(win, monkeypatch):
+def test_graph_and_continuity_items_act_on_the_view_right_clicked(win):
     grid = win.grid
     g1, g2 = _switch(grid, 1, "Graph"), _switch(grid, 2, "Graph")
     chart = _switch(grid, 3, "Continuity")
-    monkeypatch.setattr(QMenu, "exec", lambda self, *a: None)
     grid.show_context_menu(g2, QPoint(0, 0))
     win.action("graph.track_data").trigger()
     assert g1.track_data and not g2.track_data
@@ -136,15 +135,19 @@ def test_graph_and_continuity_items_act_on_the_view_right_clicked(win, monkeypat
     assert len(chart.rows) == 12
 
 
-def test_right_click_in_the_3d_view_opens_its_menu(qtbot, win, monkeypatch):
-    shown = []
-    monkeypatch.setattr(QMenu, "exec", lambda self, *a: shown.append(_titles(self)))
+def test_right_click_in_the_3d_view_opens_its_menu(qtbot, win):
     v = _switch(win.grid, 0, "3D")
     qtbot.mouseClick(v, Qt.MouseButton.RightButton, pos=QPoint(20, 20))
-    assert shown and shown[0][0] == "View" and [a.title for a in menu_actions(CONTEXT_3D)] == shown[0][1:]
+    menu = win.grid.open_menu
+    assert menu is not None and menu.isVisible()
+    titles = _titles(menu)
+    assert titles[0] == "View" and [a.title for a in menu_actions(CONTEXT_3D)] == titles[1:]
+    assert win.grid.context_target("3d") is v
+    menu.close()
+    qtbot.waitUntil(lambda: win.grid.open_menu is None, timeout=2000)
 
 
-def test_new_floating_workspace_opens_a_3d_window(qtbot, win, monkeypatch):
+def test_new_floating_workspace_opens_a_3d_window(qtbot, win):
     win.action("view.new_workspace").trigger()
     assert len(win.views.workspaces) == 1
     ws = win.views.workspaces[0]
@@ -155,7 +158,6 @@ def test_new_floating_workspace_opens_a_3d_window(qtbot, win, monkeypatch):
     assert isinstance(v, View3D) and v.isVisible() and grid.kinds[0] == "3d"
     assert [s.isVisibleTo(grid) for s in grid.slots] == [True, False, False, False]
     # the workspace has every choice of the main one, and its menu acts on its own view
-    monkeypatch.setattr(QMenu, "exec", lambda self, *a: None)
     main3d = _switch(win.grid, 0, "3D")
     main3d.image()
     v.image()
@@ -169,3 +171,11 @@ def test_new_floating_workspace_opens_a_3d_window(qtbot, win, monkeypatch):
     assert isinstance(cam, CameraView) and cam.sensor == 3
     win.action("view.new_workspace").trigger()
     assert len(win.views.workspaces) == 2 and win.views.workspaces[1] is not ws
+    # closing a workspace deletes it; the session's next changes reach only the live views
+    ws.close()
+    qtbot.waitUntil(lambda: len(win.views.workspaces) == 1 and len(win.views.grids) == 1, timeout=2000)
+    assert win.views.grids[0] is not grid
+    win.navigate.step(1)
+    win.session.select(points=[5])
+    qtbot.wait(10)
+    assert win.views.grids[0].slot_widget(0).image() is not None

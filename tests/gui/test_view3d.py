@@ -242,35 +242,34 @@ def test_shows_stabilized_positions_when_the_document_asks(win, take, monkeypatc
     p = take[0]
     fake = types.ModuleType("carapost.core.stabilize")
 
-    def stabilized_positions(project, frame):
-        return np.array([q.pos[frame] for q in project.points.values()], float) + [10.0, 0, 0]
+    def stabilized_positions(project, frame, point_ids):
+        return np.array([project.points[i].pos[frame] for i in point_ids], float) + [10.0, 0, 0]
 
     fake.stabilized_positions = stabilized_positions
     monkeypatch.setitem(sys.modules, "carapost.core.stabilize", fake)
     v = _view(win)
     f = win.session.frame
     raw = v.point_position(0)
-    win.session.doc.show_stabilized = True
-    win.session.doc._notify("display")
+    win.session.doc.set_show_stabilized(True)          # what Ctrl+Shift+S does
     moved = v.point_position(0)
     np.testing.assert_allclose(moved, v.camera.project(p.points[0].pos[f] + [10.0, 0, 0])[0], atol=1e-6)
     assert not np.allclose(raw, moved)
 
 
 @needs_gl
-def test_rom_points_are_pale_blue_dots(win, take):
-    from carapost.core.project import Project
+def test_rom_points_are_pale_blue_dots(win, monkeypatch):
+    """The view draws what ``carapost.core.rom_ops.rom_points_3d`` gives (stand-in here: one point)."""
+    from carapost.core import rom_ops
 
     v = _view(win)
-    rom = Project(3, sensors=4)
-    q = rom.new_point(point_id=0)
-    q.pos[:] = [0.0, -130.0, -20.0]
-    q.status[:] = ST_RECONSTRUCTED
-    rom.add_point(q)
-    win.session.doc.rom = rom
-    win.session.doc._notify("display")
-    xy = v.camera.project(q.pos[0])[0]
+    X = np.array([[0.0, -130.0, -20.0]])
+    monkeypatch.setattr(rom_ops, "rom_points_3d", lambda project: X)
+    v.refresh()
+    xy = v.camera.project(X)[0]
     assert _pixel(v.image(), xy) == COLORS["rom"]
+    win.action("view3d.rom").trigger()
+    assert _pixel(v.image(), xy) == COLORS["background"]
+    monkeypatch.setattr(rom_ops, "rom_points_3d", lambda project: np.zeros((0, 3)))    # no ROM loaded
     win.action("view3d.rom").trigger()
     assert _pixel(v.image(), xy) == COLORS["background"]
 
@@ -299,3 +298,13 @@ def test_without_opengl_the_view_says_so(qtbot, take, monkeypatch):
     assert img.width() == v.width()
     qtbot.mouseClick(v, Qt.MouseButton.LeftButton, pos=QPoint(10, 10))
     assert w.session.selection.points == []
+
+
+@needs_gl
+def test_show_stabilized_without_a_stabilisation_shows_the_raw_data(win, take):
+    """Through the real ``stabilized_positions``: with nothing stabilised it gives the raw positions."""
+    v = _view(win)
+    raw = v.point_position(0)
+    win.session.doc.set_show_stabilized(True)
+    np.testing.assert_allclose(v.point_position(0), raw, atol=1e-6)
+    assert "(stabilized)" in v._hud()
