@@ -61,3 +61,25 @@ def test_pico_and_debug_services(tmp_path):
     assert DebugServices.get_log_level() == "warning"
     with pytest.raises(CaraError):
         DebugServices.set_log_level("loud")
+
+
+def test_target_tracking_from_a_script(tmp_path):
+    """CaraProcess.target_track follows a keyed marker through a rendered take; Clear Tracked Points undoes it."""
+    from carapost.core import editing
+    from carapost.core.points import SRC_TARGET
+    from support import write_small_take
+
+    folder = write_small_take(tmp_path)
+    truth = np.load(folder / "truth.npz")
+    uv = truth["uv"]                                     # (F, 4, markers + brim, 2) raw px
+    F = uv.shape[0]
+    m = int(np.flatnonzero(truth["visible"][:, 0].all(axis=0))[0])    # a marker seen by channel 0 throughout
+    p = CaraProcess(folder / "Sample_0.pico")
+    p.import_xcp(folder / "calibration.xcp")
+    pid = p.document.run(editing.add_target_track(p.project, 0, 0, uv[0, 0, m])).select_after[0]
+    report = p.target_track([pid], "forward_to_end", frame=0)
+    q = p.project.point(pid)
+    assert report["last"] == F - 1 and np.all(q.src[1:, 0] == SRC_TARGET)
+    assert np.max(np.linalg.norm(q.uv[1:, 0] - uv[1:, 0, m], axis=1)) < 0.5
+    p.clear_tracked_points([pid])
+    assert not np.any(p.project.point(pid).src[1:, 0] == SRC_TARGET)

@@ -253,17 +253,74 @@ class CaraProcess:
               point_ids: list[int] | None = None, progress: Progress | None = None) -> None:
         """Track Forwards/Backwards [Sequence] (or [Single Frame]) from ``frame``."""
         from ..core.tracking import track
+
+        self._with_images(lambda images: self.document.run(
+            track(self.project, self._frame(frame), -1 if backwards else 1, point_ids=point_ids,
+                  single_frame=single_frame, images=images, progress=progress)))
+
+    def _with_images(self, fn):
+        """Run ``fn(images)`` with the take's frames (None when the project has no media)."""
         from ..io.frames import TakeFrames
 
         images = TakeFrames(self.project) if any(s.media.path and not s.media.missing
                                                  for s in self.project.sensors) else None
         try:
-            self.document.run(track(self.project, self._frame(frame), -1 if backwards else 1,
-                                    point_ids=point_ids, single_frame=single_frame, images=images,
-                                    progress=progress))
+            return fn(images)
         finally:
             if images is not None:
                 images.close()
+
+    def target_track(self, point_ids: list[int], mode: str = "forward_to_end", frame: int | None = None,
+                     channels: list[int] | None = None, progress: Progress | None = None) -> dict:
+        """The Tracker pane's buttons: Target-track ``point_ids`` from their 2D samples on ``frame``.
+
+        Parameters
+        ----------
+        point_ids : list of int
+            The points to track (they need a keyframe or 2D sample on ``frame``).
+        mode : str
+            ``"forward_to_end"``, ``"forward_one"``, ``"back_one"`` or ``"back_to_start"``
+            (to the end / start of the active range).
+        channels : list of int, optional
+            Restrict to these channels (the Selection pane's explicit selection).
+
+        Returns
+        -------
+        dict
+            The run's report (frames tracked, where and why each track stopped).
+        """
+        from ..core import target_ops
+
+        def run(images):
+            if images is None:
+                raise CaraError("target tracking needs the take's images (no media in this project)")
+            cmd = target_ops.track_targets(self.project, self._frame(frame), mode, images, point_ids,
+                                           channels, progress=progress)
+            self.document.run(cmd)
+            return dict(getattr(cmd, "report", {}) or {})
+
+        return self._with_images(run)
+
+    def add_keyframes(self, point_ids: list[int], frame: int | None = None,
+                      channels: list[int] | None = None) -> None:
+        """Edit > Add Keyframe To Current Frame for ``point_ids`` on ``frame``."""
+        from ..core import target_ops
+
+        self.document.run(target_ops.add_keyframes(self.project, point_ids, self._frame(frame), channels))
+
+    def gaps_to_keys(self, point_ids: list[int], channels: list[int] | None = None) -> None:
+        """Edit > Gaps To Keys: keyframes on the samples either side of every gap of ``point_ids``."""
+        from ..core import target_ops
+
+        self.document.run(target_ops.gaps_to_keys(self.project, point_ids, channels))
+
+    def clear_tracked_points(self, point_ids: list[int], start: int | None = None, end: int | None = None) -> None:
+        """The Tracker pane's Clear Tracked Points over ``start..end`` (default: the active range)."""
+        from ..core import target_ops
+
+        a, b = self.project.active_range
+        self.document.run(target_ops.clear_tracked(self.project, point_ids, a if start is None else start,
+                                                   b if end is None else end))
 
     def interpolate_gaps(self, point_ids: list[int] | None = None) -> None:
         """Process > Interpolate Gaps over the active range (all points, or ``point_ids``)."""
