@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 #: When an action is enabled (besides ``available``); the GUI evaluates these names.
-ENABLE_CONDITIONS = ("always", "project", "undo", "redo", "history", "recent", "brim_svg")
+ENABLE_CONDITIONS = ("always", "project", "undo", "redo", "history", "recent", "brim")
 
 #: Top-level menus in menu-bar order.
 MENUS = ("File", "Edit", "View", "Process", "Help")
@@ -193,8 +193,9 @@ ACTIONS: tuple[Action, ...] = (
     _A("view.new_workspace", "View", "New Floating Workspace", "", "views.new_workspace", "project",
        "A floating window with the workspace's views (the 3D view first).", separator_before=True,
        while_busy=True),
-    _A("view.show_brim_svg", "View", "Show Calibration Brim SVG", "", "views.show_brim_svg", "brim_svg",
-       "Show the imported calibration brim SVG.", while_busy=True),
+    _A("view.show_brim_svg", "View", "Show Calibration Brim SVG", "", "views.show_brim_svg", "brim",
+       "Show the calibration brim (its SVG, or the default brim's layout), numbered; click a marker to attach "
+       "the detections selected in the camera views to it.", while_busy=True),
     _A("view.full_screen", "View", "Full Screen", "F", "views.full_screen", "always",
        "Fill the screen with the window.", checkable=True, while_busy=True),
     _A("view.toggle_docks", "View", "Toggle Dock Widget Visibility", "Ctrl+F", "views.toggle_docks", "always",

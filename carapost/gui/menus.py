@@ -100,7 +100,7 @@ class ActionSet:
             "undo": doc.stack.can_undo(),
             "redo": doc.stack.can_redo(),
             "history": len(doc.stack) > 0,
-            "brim_svg": p.brim is not None and bool(p.brim.svg),
+            "brim": p.brim is not None and len(p.brim) > 0,
         }[name]
 
     def update(self) -> None:

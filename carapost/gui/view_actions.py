@@ -38,6 +38,8 @@ class ViewActions:
         self.workspaces: list[QWidget] = []
         #: the view grids of the floating workspaces
         self.grids: list = []
+        #: View > Show Calibration Brim SVG's window, made when first shown
+        self.brim_window = None
 
     @property
     def s(self):
@@ -173,17 +175,15 @@ class ViewActions:
             self.grids.remove(grid)
 
     def show_brim_svg(self) -> None:
-        """Show Calibration Brim SVG."""
-        from PySide6.QtCore import QByteArray
-        from PySide6.QtSvgWidgets import QSvgWidget
+        """Show Calibration Brim SVG: the Brim window, where clicking a marker attaches the selected detections."""
+        from .brim_window import BrimWindow
 
-        p = self.s.project
-        w = QSvgWidget()
-        w.load(QByteArray(p.brim.svg.encode("utf-8")))
-        w.setWindowTitle(f"Calibration brim {p.brim.name}")
-        w.resize(600, 400)
-        w.show()
-        self.workspaces.append(w)
+        if self.brim_window is None:
+            self.brim_window = BrimWindow(self.s, self.w)
+            # the window's shortcuts (Undo, frame steps...) work while the user clicks markers
+            self.brim_window.addActions(self.w.actions())
+        self.brim_window.show()
+        self.brim_window.raise_()
 
 
 def context_grid(window):

@@ -95,7 +95,7 @@ def apply_seeds(project, seeds: dict, parts=("brim", "face")) -> Command:
     done: list[Command] = []
     try:
         if brim_entries:
-            cmd = _brim_command(project, frame, brim_entries)
+            cmd = brim_command(project, frame, brim_entries)
             cmd.do(project)
             done.append(cmd)
         for label, dets in face_entries:
@@ -114,7 +114,25 @@ def apply_seeds(project, seeds: dict, parts=("brim", "face")) -> Command:
     return out
 
 
-def _brim_command(project, frame, entries) -> Command:
+def brim_command(project, frame: int, entries, name: str = "Brim Seeds") -> Command:
+    """Attach detections of ``frame`` to brim markers (seeds.json's brim entries, the Brim window's clicks).
+
+    Parameters
+    ----------
+    project : Project
+    frame : int
+    entries : list of (int, dict)
+        ``(brim marker index, {sensor: detection index})``, already checked against the project.
+    name : str
+        History entry.
+
+    Returns
+    -------
+    Command
+        Not yet done.  A missing brim point is created; an attachment replaces
+        the brim point's earlier sample in that channel; a detection held by any
+        other point is detached from it (a detection belongs to one point).
+    """
     bp = brim_points(project)
     new, updates = [], []
     nid = project.next_point_id
@@ -157,4 +175,4 @@ def _brim_command(project, frame, entries) -> Command:
         cmds.append(AddPoints(new, name="Add Brim Points"))
     if updates:
         cmds.append(SetPointData(updates, name="Attach Brim Detections"))
-    return CompoundCommand("Brim Seeds", cmds)
+    return CompoundCommand(name, cmds)
