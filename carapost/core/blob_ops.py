@@ -242,7 +242,7 @@ def detect_frames(frames: Iterable[tuple[object, np.ndarray]], properties, worke
                   progress: Progress | None = None) -> dict:
     """Detect blobs on a stream of ``(key, image)`` with a pool of worker processes.
 
-    Processes, not threads: the fit runs many small numpy operations that hold
+    Processes, not threads: the measurement runs many small numpy operations that hold
     the GIL, and a thread pool measured no faster than one thread (12 vs 12
     frames/s) where two processes doubled it.  Workers are spawned (safe beside
     a GUI's threads); at most ``2 * workers`` frames are in flight, so a long

@@ -40,7 +40,7 @@ BORDER = 3.5
 TAPER_IN, TAPER_OUT = 1.5, 3.0
 #: The background plane is fitted to the ring from RING[0] to RING[1] px beyond the blob's radius.
 RING = (1.5, 3.5)
-#: Radial-symmetry solves, each about the previous answer.
+#: Radial-symmetry solves, each about the previous answer, from a window centred on a candidate.
 PASSES = 3
 #: A background slope is kept only beyond this many standard deviations of its noise.
 SLOPE_K = 4.0
@@ -106,7 +106,7 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _plane(P, G, cx, cy, r, noise):
-    """Background plane (b, gx, gy) from the ring outside the blob about (cx, cy); the ring mask; its radii."""
+    """Background plane (b, gx, gy) from the ring outside the blob about (cx, cy), and the ring (weights)."""
     dxc = G.X - cx[:, None]
     dyc = G.Y - cy[:, None]
     dc = np.sqrt(dxc * dxc + dyc * dyc)
@@ -125,7 +125,30 @@ def _plane(P, G, cx, cy, r, noise):
     return plane, ring
 
 
-def measure(patches: np.ndarray, r0: np.ndarray, noise: float):
+def _lines(gx, gy, G, cx, cy, r, noise, lim):
+    """One radial-symmetry solve about (cx, cy); returns the new centre, the weights and the gradients.
+
+    Line: through (GX, GY) along (gx, gy), normal n = (-gy, gx).  Minimise
+    sum w (n . (c - p))^2, i.e. solve (sum w n n^T) c = sum w n (n . p).
+    """
+    g2 = gx * gx + gy * gy
+    w = _taper(np.hypot(G.GX - cx[:, None], G.GY - cy[:, None]), r)
+    # Lines of pure noise would pull the answer towards the window's centre: the weight
+    # of the weakest is dropped.
+    w *= np.maximum(g2 - noise * noise, 0.0)
+    wgx, wgy = w * gx, w * gy
+    sxx, syy, sxy = _dot(wgy, gy), _dot(wgx, gx), -_dot(wgx, gy)
+    npx = gx * G.GY - gy * G.GX
+    bx, by = -_dot(wgy, npx), _dot(wgx, npx)
+    det = sxx * syy - sxy * sxy
+    good = det > 1e-12 * (sxx + syy) ** 2 + 1e-20
+    safe = np.where(good, det, 1.0)
+    cx = np.clip(np.where(good, (syy * bx - sxy * by) / safe, cx), -lim, lim).astype(np.float32)
+    cy = np.clip(np.where(good, (sxx * by - sxy * bx) / safe, cy), -lim, lim).astype(np.float32)
+    return cx, cy, w, gx, gy
+
+
+def measure(patches: np.ndarray, r0: np.ndarray, noise: float, passes: int = PASSES):
     """Centre, ellipse and edge measurements of bright blobs near each window's centre.
 
     Parameters
@@ -136,6 +159,8 @@ def measure(patches: np.ndarray, r0: np.ndarray, noise: float):
         Radius guess (px): sizes the tapered weights and the background ring.
     noise : float
         Image noise (grey levels).
+    passes : int
+        Radial-symmetry solves (fewer suffice when the window is already centred on the blob).
 
     Returns
     -------
@@ -166,33 +191,18 @@ def measure(patches: np.ndarray, r0: np.ndarray, noise: float):
     cx = np.zeros(N, np.float32)
     cy = np.zeros(N, np.float32)
     lim = np.float32(h - 1)
-    for _ in range(PASSES):
+    for _ in range(max(1, passes)):
         plane, ring = _plane(P, G, cx, cy, r, noise)
-        gx = gx0 - plane[:, 1:2]              # a plane only shifts every gradient by its slope
-        gy = gy0 - plane[:, 2:3]
-        g2 = gx * gx + gy * gy
-        # Line: through (GX, GY) along (gx, gy), normal (-gy, gx).  Minimise
-        # sum w (n . (c - p))^2  ->  (sum w n n^T) c = sum w n (n . p).
-        w = _taper(np.hypot(G.GX - cx[:, None], G.GY - cy[:, None]), r)
-        # Lines of pure noise would pull the answer towards the window's centre: the weight
-        # of the weakest is dropped.
-        w *= np.maximum(g2 - noise * noise, 0.0)
-        wgx, wgy = w * gx, w * gy
-        sxx, syy, sxy = _dot(wgy, gy), _dot(wgx, gx), -_dot(wgx, gy)
-        npx = gx * G.GY - gy * G.GX
-        bx, by = -_dot(wgy, npx), _dot(wgx, npx)
-        det = sxx * syy - sxy * sxy
-        good = det > 1e-12 * (sxx + syy) ** 2 + 1e-20
-        safe = np.where(good, det, 1.0)
-        cx = np.clip(np.where(good, (syy * bx - sxy * by) / safe, cx), -lim, lim).astype(np.float32)
-        cy = np.clip(np.where(good, (sxx * by - sxy * bx) / safe, cy), -lim, lim).astype(np.float32)
+        # A plane only shifts every gradient by its slope.
+        cx, cy, w, gx, gy = _lines(gx0 - plane[:, 1:2], gy0 - plane[:, 2:3], G, cx, cy, r, noise, lim)
+    D = P - plane[:, 0:1] - plane[:, 1:2] * G.X - plane[:, 2:3] * G.Y
+    a_n = D[:, G.centre9].max(1)
+    a = np.maximum(a_n, 0.5 * noise + 1e-3)
+    g2 = gx * gx + gy * gy
     # How well the lines meet: weighted RMS distance of the lines from the centre (px).
     dist = gx * (cy[:, None] - G.GY) - gy * (cx[:, None] - G.GX)
     line_rms = np.sqrt(_dot(w, dist * dist) / np.maximum(_dot(w, g2), 1e-9))
-    D = P - plane[:, 0:1] - plane[:, 1:2] * G.X - plane[:, 2:3] * G.Y
     border_std = np.sqrt(_dot(ring, D * D) / np.maximum(ring.sum(1), 1.0))
-    a_n = D[:, G.centre9].max(1)
-    a = np.maximum(a_n, 0.5 * noise + 1e-3)
     inside = np.clip(D * (2.0 / a)[:, None] - 0.5, 0.0, 1.0)
     # The inside map's centroid about the lines' centre, then the blend.
     dx = G.X - cx[:, None]

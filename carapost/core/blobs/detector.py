@@ -22,7 +22,7 @@ import numpy as np
 from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from . import features as fe
-from .centre import BORDER, MEASURE_NAMES, WINDOWS, extract, measure, window_for
+from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, extract, measure, window_for
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
 
@@ -100,12 +100,24 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
                       fe.profile_radius(F) * 2.0 ** lv, noise, F), bright
 
 
+#: Rounds of measurement; each re-centres the window on the last answer and sizes it by the last major axis.
+ROUNDS = 3
+#: The weights' radius for the next round, over the measured semi-major axis (a margin: a taper
+#: that cuts the edge measures the blob smaller than it is, and would keep doing so).
+GROW = 1.15
+
+
 def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float):
     """Steps 3-4: centre and ellipse of each candidate; returns full-resolution (x, y, major, minor, angle, ok, extra).
 
-    ``extra`` is ``(N, len(MEASURE_NAMES))`` (:func:`.centre.measure`).  Two rounds:
-    the first from the candidate (coarse-octave candidates start pixels off), the
-    second in a window re-centred on the first answer and sized by its major axis.
+    ``extra`` is ``(N, len(MEASURE_NAMES))`` (:func:`.centre.measure`).  Up to
+    :data:`ROUNDS` rounds: the first from the candidate (coarse-octave candidates
+    start pixels off), each next one in a window re-centred on the last answer and
+    sized by its major axis, for the blobs whose centre or size changed.  A large
+    elongated blob is often two candidates (the ends of its major axis): after the
+    first round, answers closer than half the larger minor axis are one blob, and
+    only the one whose candidate was nearest its answer is measured on (the others
+    are not ``ok``).
     """
     n = len(x)
     out = [np.zeros(n, np.float64) for _ in range(5)]
@@ -117,20 +129,37 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     pad = cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
     h, w = bright.shape
     cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
-    for _round in range(2):
-        win = window_for(rr)
-        ix = np.clip(np.rint(cx).astype(np.int64), 0, w - 1)
-        iy = np.clip(np.rint(cy).astype(np.int64), 0, h - 1)
+    todo = np.arange(n)
+    for rnd in range(ROUNDS):
+        win = window_for(rr[todo])
+        ix = np.clip(np.rint(cx[todo]).astype(np.int64), 0, w - 1)
+        iy = np.clip(np.rint(cy[todo]).astype(np.int64), 0, h - 1)
         for hw in np.unique(win).tolist():
-            sel = np.flatnonzero(win == hw)
-            res = measure(extract(pad, ix[sel] + hp, iy[sel] + hp, hw), rr[sel], noise)
-            out[0][sel], out[1][sel] = ix[sel] + res[0], iy[sel] + res[1]
+            k = np.flatnonzero(win == hw)
+            sel = todo[k]
+            res = measure(extract(pad, ix[k] + hp, iy[k] + hp, hw), rr[sel], noise, PASSES if rnd == 0 else 2)
+            out[0][sel], out[1][sel] = ix[k] + res[0], iy[k] + res[1]
             for i in (2, 3, 4):
                 out[i][sel] = res[i]
             ok[sel] = res[5]
             extra[sel] = res[6]
-        cx, cy = np.where(ok, out[0], cx), np.where(ok, out[1], cy)
-        rr = np.where(ok, np.clip(0.5 * out[2], 1.0, WINDOWS[-1] - BORDER), rr)
+        if rnd == 0:
+            # A candidate outside the blob it led to belongs to something else (a neighbour's
+            # measurement took it in): it must not win the merge below.
+            moved = np.hypot(out[0] - x, out[1] - y)
+            ok &= moved <= np.maximum(np.maximum(0.5 * out[2], r0), 2.0)
+            good = np.flatnonzero(ok)
+            # Of one blob's candidates, the one nearest the answer (its window was the best centred).
+            keep = good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]
+            ok[np.setdiff1d(good, keep)] = False
+        t = todo[ok[todo]]
+        r_new = np.clip(GROW * 0.5 * out[2][t], 1.0, WINDOWS[-1] - BORDER)
+        moved = np.hypot(out[0][t] - cx[t], out[1][t] - cy[t])
+        again = t[(moved > 0.5) | (np.abs(r_new - rr[t]) > 0.1 * rr[t])]
+        cx[t], cy[t], rr[t] = out[0][t], out[1][t], r_new
+        todo = again
+        if len(todo) == 0:
+            break
     return (*out, ok, extra)
 
 
@@ -207,9 +236,9 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
     x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
                                                          cand.noise)
-    # The centre may wander to a neighbour: it must stay near the candidate.
+    # The centre may wander to a neighbour: the candidate must stay inside the blob found.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
-    ok &= moved <= np.maximum(1.0 * cand.radius[sel], 2.0)
+    ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)
     ok &= minor > 0.5
     h, w = bright.shape
     ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)

@@ -2,9 +2,10 @@
 
 Stage 1 scores every candidate from its pyramid-level neighbourhood
 (:data:`~.features.FEATURE_NAMES`), cheaply, so that only plausible blobs
-are fitted.  Stage 2 scores fitted blobs from what the fit reveals —
-edge width (paint has sharp edges, nostrils and shading do not), fit residual,
-contrast-to-noise, size and elongation — together with the stage-1 logit.  The
+are measured.  Stage 2 scores measured blobs from what the measurement reveals
+(:data:`FIT_FEATURE_NAMES`: how well the gradient lines meet, edge sharpness — paint
+has sharp edges, nostrils and shading do not — background residual and slope,
+contrast-to-noise, size, elongation) together with the stage-1 logit.  The
 stage-2 probability is the detection's score and what the Black/White
 Threshold applies to.
 
@@ -24,10 +25,10 @@ from ..errors import CaraError
 from .features import FEATURE_NAMES
 
 RESOURCE_DIR = Path(__file__).resolve().parents[3] / "resources"
-#: Features of a fitted blob seen by stage 2 (after the stage-1 logit).
+#: Features of a measured blob seen by stage 2 (after the stage-1 logit; see :mod:`.centre`).
 FIT_FEATURE_NAMES = ("s1_logit", "log_cnr", "log_major", "axis_ratio", "line_rms", "log_sharpness",
                      "border_std", "slope", "fill", "edge_share", "moved")
-#: Stage-1 probability below which a candidate is not fitted at all.
+#: Stage-1 probability below which a candidate is not measured at all.
 STAGE1_GATE = 0.15
 
 

@@ -282,3 +282,37 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
             s.brim = brim[tr.visible]
             out.append(s)
     return out
+
+
+def match_truth(points: np.ndarray, truth: SynthImage, tol: float = 1.5, hidden_px: float = 6.0):
+    """Score detected centres against one image's truth.
+
+    A point within ``tol`` px of a visible marker's centre is a hit (one per marker,
+    nearest first); a point within ``hidden_px`` of a hidden marker is neither hit
+    nor false; any other point is false.
+
+    Returns
+    -------
+    hit : ndarray of bool (len(truth.centres),)
+        Which markers were found.
+    false : int
+        False detections.
+    errors : ndarray (hits, 2)
+        Detected minus true centre of each hit.
+    """
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, float).reshape(-1, 2)
+    hit = np.zeros(len(truth.centres), bool)
+    if len(pts) == 0 or len(truth.centres) == 0:
+        return hit, len(pts), np.zeros((0, 2))
+    d, j = cKDTree(truth.centres).query(pts)
+    hidden = cKDTree(truth.hidden) if len(truth.hidden) else None
+    errs, false = [], 0
+    for k in np.argsort(d, kind="stable"):
+        if d[k] <= tol and not hit[j[k]]:
+            hit[j[k]] = True
+            errs.append(pts[k] - truth.centres[j[k]])
+        elif hidden is None or hidden.query(pts[k])[0] >= hidden_px:
+            false += 1
+    return hit, false, np.array(errs, float).reshape(-1, 2)
