@@ -51,3 +51,43 @@ def test_initialize_needs_seeds():
     sc.project.rig = None
     with pytest.raises(CaraError, match="intrinsics"):
         initialize_3d(sc.project, 0)
+
+
+def test_rendered_sample_lips_are_not_cross_matched(tmp_path):
+    """On a rendered sample take the lip markers sit one above the other, on the same epipolar lines.
+
+    A wrong upper/lower lip match lands near the points grown so far while the right one is
+    still beyond Max Allowed Depth; it used to be accepted as "unambiguous" (the right one was
+    not yet a candidate), leaving 4-5 mismatched points on seed 0.
+    """
+    import json
+
+    from carapost.core.blob_ops import detect_blobs_range
+    from carapost.core.points import FACE, SRC_DETECTION, ST_NONE
+    from carapost.io.brim_svg import read_brim_svg
+    from carapost.io.imports import import_xcp
+    from carapost.io.take import project_from_input
+    from carapost.sample import write_sample
+
+    write_sample(tmp_path, markers=35, frames=1, seed=0, workers=1)
+    truth = np.load(tmp_path / "truth.npz")
+    pr = project_from_input(str(tmp_path / "Sample_0.pico"), None)
+    import_xcp(pr, tmp_path / "calibration.xcp", lambda s: None).do(pr)
+    detect_blobs_range(pr, 0, 0, workers=1).do(pr)
+    seeds = json.loads((tmp_path / "seeds.json").read_text())
+    process_to_init3d(pr, seeds, read_brim_svg(tmp_path / "brim.svg"), log=lambda s: None)
+    uv, vis, M = truth["uv"][0], truth["visible"][0], truth["face_xyz"].shape[1]
+    owner = []
+    for s in range(4):
+        rec = pr.detections[s].frame(0)
+        d = np.linalg.norm(np.column_stack([rec["x"], rec["y"]])[:, None] - uv[s][None], axis=2)
+        d = np.where(vis[s][None], d, np.inf)
+        owner.append(np.where(d.min(1) < 1.5, d.argmin(1), -1))
+    markers_of = [{int(owner[s][q.det[0, s]]) for s in range(4) if q.src[0, s] == SRC_DETECTION}
+                  for q in pr.points.values() if q.kind == FACE and q.status[0] != ST_NONE]
+    crossed = [m for m in markers_of if len(m - {-1}) > 1]
+    assert not crossed
+    lips = {i for i, lab in enumerate(truth["labels"]) if str(lab).startswith("Lip_")}
+    assert lips <= set().union(*markers_of)
+    for s in range(4):
+        assert np.linalg.norm(np.asarray(pr.rig.camera(s, 0).position) - truth["cam_t"][0, s]) < 0.3

@@ -34,6 +34,10 @@ ATTACH_GATE_PX = 2.0
 ATTACH_CLEARANCE_PX = 5.0
 #: Observations farther than this (px) from the bundled point are detached.
 REJECT_PX = 2.0
+#: A candidate pair is supported by another camera with a detection this close (px) to its projection...
+SUPPORT_GATE_PX = 3.0
+#: ...and a candidate without that support counts as this much farther from its epipolar line (px).
+UNSUPPORTED_PENALTY_PX = 2.0
 
 
 def _brim_region(cam, markers, xy, margin):
@@ -68,7 +72,31 @@ def _unambiguous(ia, ib, d):
     return ok
 
 
-def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi):
+def other_view_support(cams, xy, X, skip, gate=SUPPORT_GATE_PX):
+    """How many cameras outside ``skip`` have a detection within ``gate`` px of each point's projection.
+
+    Parameters
+    ----------
+    cams : list of Camera
+    xy : list of ndarray (N_s, 2)
+        Every camera's detections (raw px).
+    X : ndarray (n, 3)
+    skip : iterable of int
+        The cameras that made the points (they support them trivially).
+    """
+    count = np.zeros(len(X), int)
+    for s, cam in enumerate(cams):
+        if s in skip or len(xy[s]) == 0 or len(X) == 0:
+            continue
+        uv = cam.project(X)
+        ok = np.all(np.isfinite(uv), axis=1)
+        d = np.full(len(X), np.inf)
+        d[ok] = cKDTree(xy[s]).query(uv[ok])[0]
+        count += d <= gate
+    return count
+
+
+def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi, support=None):
     """Step 2 for one caddy.
 
     Parameters
@@ -77,6 +105,13 @@ def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi):
         Free detections (raw px).
     seeds_X : ndarray (K, 3)
         Current 3D points.
+    support : callable, optional
+        ``support(X) -> (n,) int``: cameras of the other caddy that see a
+        detection where candidate points project.  Markers one above the other
+        lie on the same epipolar line of a caddy's upper and lower cameras, so
+        the epipolar distance cannot tell their matches apart; the other caddy,
+        looking from the side, can: a candidate it supports beats one it does
+        not.
 
     Returns
     -------
@@ -94,6 +129,8 @@ def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi):
     good = np.all(np.isfinite(X), axis=1)
     good[good] &= (cam_a.depth(X[good]) > 0) & (cam_b.depth(X[good]) > 0)
     ia, ib, d, X = ia[good], ib[good], d[good], X[good]
+    if support is not None and len(X):
+        d = d + UNSUPPORTED_PENALTY_PX * (support(X) == 0)
     free_a = np.ones(len(xy_a), bool)
     free_b = np.ones(len(xy_b), bool)
     pts = [np.asarray(seeds_X, float)]
@@ -101,11 +138,14 @@ def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi):
     alive = np.ones(len(ia), bool)
     while True:
         tree = cKDTree(np.concatenate(pts))
-        near = tree.query(X[alive], distance_upper_bound=max_depth)[0] <= max_depth
-        idx = np.flatnonzero(alive)[near]
-        if len(idx) == 0:
+        idx = np.flatnonzero(alive)
+        near = tree.query(X[idx], distance_upper_bound=max_depth)[0] <= max_depth
+        if not np.any(near):
             break
-        acc = idx[_unambiguous(ia[idx], ib[idx], d[idx])]
+        # Clear among every free candidate, not only those near the points grown so far: a wrong
+        # match that happens to land near them must not win just because the right one lies
+        # farther out and is not considered yet.
+        acc = idx[near & _unambiguous(ia[idx], ib[idx], d[idx])]
         if len(acc) == 0:
             break
         for j in acc:
@@ -175,8 +215,11 @@ def initialize_3d(project, frame: int, params: dict | None = None):
     grown = []
     for a, b in project.caddies():
         fa, fb = np.flatnonzero(~blocked[a]), np.flatnonzero(~blocked[b])
+        def support(X, a=a, b=b):
+            return other_view_support(cams, xy, X, (a, b))
+
         for i, j, X in grow_pair(cams[a], cams[b], xy[a][fa], xy[b][fb], seed_X, p["max_allowed_depth"],
-                                 p["max_allowed_symmetric_epipolar_distance"]):
+                                 p["max_allowed_symmetric_epipolar_distance"], support):
             det = np.full(S, -1)
             det[a], det[b] = fa[i], fb[j]
             grown.append({"id": None, "det": det, "X": X})
