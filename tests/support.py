@@ -127,3 +127,17 @@ def copy_take(src, dst, take: str, extra=("calibration.xcp", "brim.svg", "seeds.
     for name in extra:
         shutil.copy2(src / name, dst / name)
     return dst
+
+
+def remove_marker_detection(sc, f, s, m):
+    """Delete marker ``m``'s detection in sensor ``s`` on frame ``f`` of a synthetic take (indices kept in step)."""
+    table = sc.project.detections[s]
+    rec = table.frame(f)
+    i = sc.face_det[f, s, m]
+    keep = np.ones(len(rec), bool)
+    keep[i] = False
+    table.set_frame(f, rec[keep])
+    row = sc.face_det[f, s]
+    row[row > i] -= 1
+    row[m] = -1
+    sc.brim_det[f, s][sc.brim_det[f, s] > i] -= 1

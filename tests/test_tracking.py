@@ -12,6 +12,7 @@ from carapost.core.progress import Progress
 from carapost.core.tracking import track, track_backwards_sequence, track_forwards_sequence, track_single_frame
 from carapost.core.tracking.evaluate import evaluate, identify
 from carapost.core.tracking.synthetic_take import initialise, make_take
+from support import remove_marker_detection
 
 QUIET = dict(jaw_mm=0.0, blinks=0, occlusion_rate=0.0, hidden_markers=0, slips=0)
 
@@ -52,19 +53,6 @@ def set_marker_detection(sc, f, s, m, uv=None, scale=None):
         rec["major"][i] *= scale
         rec["minor"][i] *= scale
     table.set_frame(f, rec)
-
-
-def remove_marker_detection(sc, f, s, m):
-    table = sc.project.detections[s]
-    rec = table.frame(f)
-    i = sc.face_det[f, s, m]
-    keep = np.ones(len(rec), bool)
-    keep[i] = False
-    table.set_frame(f, rec[keep])
-    row = sc.face_det[f, s]
-    row[row > i] -= 1
-    row[m] = -1
-    sc.brim_det[f, s][sc.brim_det[f, s] > i] -= 1
 
 
 # ------------------------------------------------------------------------------------------------ quality
