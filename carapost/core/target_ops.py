@@ -29,7 +29,7 @@ from .edits import SetPointData
 from .errors import CaraError
 from .points import (POINT_FIELDS, SRC_DETECTION, SRC_KEYFRAME, SRC_NONE, SRC_TARGET, ST_NONE, ST_RECONSTRUCTED,
                      ST_SINGLE, Point)
-from .progress import Progress
+from .progress import Progress, frame_payload
 from .target_tracker import STOP_EDGE, STOP_FLAT, STOP_SCORE, Box, Keyframe, SensorTracker
 
 #: Tracker pane buttons: mode -> (title, direction, single frame).
@@ -187,6 +187,18 @@ def _reference_3d(project, rows: _Rows, pid: int, f: int, direction: int) -> np.
     return p.pos[have[np.argmin(np.abs(have - f))]].astype(np.float64)
 
 
+def _publish(progress: Progress, rows: _Rows, ids: list[int], f: int) -> None:
+    """Hand frame ``f`` of the tracked points (their rows as they will be committed) to the progress listener."""
+    i = f - rows.lo
+    r = [rows.row(pid) for pid in ids]
+
+    def col(key):
+        return np.array([row[key][i] for row in r])
+
+    progress.publish(f, frame_payload(np.array(ids, np.int64), col("status"), col("src"), col("uv"), col("score"),
+                                      pos=col("pos"), residual=col("residual"), det=col("det")))
+
+
 class _Images:
     """``images(sensor, frame)`` with the few frames in use kept (patterns and the frame tracked)."""
 
@@ -230,6 +242,8 @@ def track_targets(project, frame: int, mode: str, images, point_ids: Sequence[in
         Explicitly selected channels (default: all).
     progress : Progress, optional
         One step per frame; a cancel raises Cancelled (nothing is kept).
+        When it is :attr:`~carapost.core.progress.Progress.publishing`, each
+        frame's samples of the tracked points (2D and 3D) are published.
     should_stop : callable, optional
         Polled every frame; when it returns True the run ends there and the
         frames done are kept (the Pause button).
@@ -311,6 +325,7 @@ def track_targets(project, frame: int, mode: str, images, point_ids: Sequence[in
                         + ": add a keyframe first (Edit > Edit Target Track)")
     key_frames = {f for pid in ids for (f, _s) in (new_keys.get(pid) or project.point(pid).keyframes)}
 
+    tracked_ids = list(dict.fromkeys(pid for pid, _s in trackers))
     if progress is not None:
         progress.start(len(frames), name)
     stops: dict[tuple[int, int], tuple[int, str]] = {}
@@ -344,7 +359,13 @@ def track_targets(project, frame: int, mode: str, images, point_ids: Sequence[in
             stopped_by = "every channel stopped"
             break
         last, done = f, done + 1
+        # 3D frame by frame, in tracking order: the same result as all frames at the end, but the
+        # frame is complete now for a live display
+        _rebuild_3d(project, rows, {pid: [f] for pid, fr in rows.changed.items() if fr and fr[-1] == f},
+                    direction, allow_single)
         if progress is not None:
+            if progress.publishing:
+                _publish(progress, rows, tracked_ids, f)
             progress.step(1, f"frame {f}")
         if on_frame is not None:
             on_frame(f)
@@ -353,8 +374,6 @@ def track_targets(project, frame: int, mode: str, images, point_ids: Sequence[in
         raise CaraError(f"{name}: nothing tracked from frame {frame}"
                         + (f" ({why})" if why else f" ({stopped_by})" if stopped_by else ""))
 
-    _rebuild_3d(project, rows, {pid: [f for f in fr if f != frame] for pid, fr in rows.changed.items()},
-                direction, allow_single)
     cmds: list[Command] = []
     data = rows.command("Target Tracked Points")
     if data is not None:

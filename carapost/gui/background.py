@@ -69,7 +69,7 @@ class BackgroundRunner(QObject):
         return self._job is not None
 
     def run(self, fn: Callable[[Progress], object], title: str, on_done: Callable | None = None,
-            cancellable: bool = True, quiet: bool = False) -> bool:
+            cancellable: bool = True, quiet: bool = False, preview=None) -> bool:
         """Start ``fn(progress)``; False when another job is running.
 
         Parameters
@@ -86,13 +86,18 @@ class BackgroundRunner(QObject):
             Show the Cancel button.
         quiet : bool
             Log only failures (autosave).
+        preview : LivePreview, optional
+            Receives what the job publishes per frame (``progress.publish``)
+            while it runs, when the Tracker settings ask for it; cleared when
+            the job ends, after its command was pushed.
         """
         if self._job is not None:
             log.warning(f"{title}: wait until {self._job[0]} has finished")
             return False
         signals = _Signals(self)
-        progress = Progress(callback=lambda d, t, m: signals.progress.emit(d, t, m))
-        self._job = (title, progress, signals, on_done, quiet, time.perf_counter())
+        listener = preview.begin() if preview is not None else None
+        progress = Progress(callback=lambda d, t, m: signals.progress.emit(d, t, m), listener=listener)
+        self._job = (title, progress, signals, on_done, quiet, time.perf_counter(), preview)
         signals.finished.connect(self._finished)
         if self.panel is not None:
             signals.progress.connect(self.panel.set_progress)
@@ -115,7 +120,7 @@ class BackgroundRunner(QObject):
         return self.pool.waitForDone(timeout_ms)
 
     def _finished(self, result, error) -> None:
-        title, _progress, signals, on_done, quiet, t0 = self._job
+        title, _progress, signals, on_done, quiet, t0, preview = self._job
         self._job = None
         signals.deleteLater()
         if self.panel is not None:
@@ -123,6 +128,8 @@ class BackgroundRunner(QObject):
         self.session.set_busy(False)
         secs = time.perf_counter() - t0
         ok = False
+        if preview is not None and error is not None:
+            preview.end(False)          # before any message box: the overlay goes with the failed job
         if isinstance(error, Cancelled):
             log.warning(f"{title}: cancelled; nothing was changed")
         elif isinstance(error, CaraError):
@@ -134,12 +141,16 @@ class BackgroundRunner(QObject):
             ok = True
             from ..core.commands import Command
 
-            if isinstance(result, Command):
-                ok = self.session.run(result)
-            elif not quiet:
-                log.info(f"{title}: done in {secs:.1f} s")
-            if ok and on_done is not None:
-                on_done(result)
+            try:
+                if isinstance(result, Command):
+                    ok = self.session.run(result)
+                elif not quiet:
+                    log.info(f"{title}: done in {secs:.1f} s")
+                if ok and on_done is not None:
+                    on_done(result)
+            finally:
+                if preview is not None:
+                    preview.end(ok)
         self.jobFinished.emit(title, ok)
 
 

@@ -10,7 +10,9 @@ take fits in the column budget (about twice the widget's width) the image is
 the whole take at one column per frame (``bin`` 1, ``first`` 0); longer takes
 are drawn for the visible frames only, binned by a power of two, and redrawn
 when the view pans or zooms.  :meth:`ContinuityBars.color_at` reads a colour
-back from the drawn image.
+back from the drawn image.  While a track runs with Update Timeline Every Frame,
+the frames it has done are coloured from its live overlay
+(:mod:`carapost.gui.live_preview`) before the project holds them.
 
 Mouse: click selects the point of a row and goes to the clicked frame
 (Ctrl+click toggles it in the selection), drag scrubs frames, double-click
@@ -21,6 +23,7 @@ action registry's items, see :mod:`carapost.gui.viewgrid`).
 """
 from __future__ import annotations
 
+import time
 import weakref
 
 import numpy as np
@@ -29,7 +32,8 @@ from PySide6.QtCore import QPoint, QPointF, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QPainterPath, QPen
 from PySide6.QtWidgets import QGraphicsPathItem
 
-from ..core.continuity import C_GAP, ContinuityModel
+from ..core.continuity import C_GAP, ContinuityModel, rgba
+from . import live_preview
 
 BACKGROUND = (30, 30, 30)
 ROW_PX = 15            #: initial height of a row in screen pixels (the chart shows as many as fit)
@@ -150,6 +154,7 @@ class ContinuityBars(pg.PlotWidget):
         s.projectChanged.connect(self.on_project)
         s.frameChanged.connect(self.on_frame)
         s.selectionChanged.connect(self.on_selection)
+        live_preview.of(s).changed.connect(self.on_live)
         self.on_document()
 
     # ------------------------------------------------------------------ rows
@@ -236,7 +241,11 @@ class ContinuityBars(pg.PlotWidget):
             stop = min(F, int(np.ceil(x1 + 0.5)) + 1)
             if stop <= start:
                 start, stop = 0, F
-        img, self.bin, self.first = self.model.image(self.rows, start, stop, cols)
+        codes, self.bin, self.first = self.model.codes(self.rows, start, stop, cols)
+        live = live_preview.existing(self.session)
+        if live is not None and live.active:
+            live.patch_codes(codes, self.rows, self.bin, self.first, self.model)
+        img = rgba(codes)
         self._drawn_range = (start, stop)
         self.image.setImage(img, autoLevels=False, levels=None)
         self.image.setRect(QRectF(self.first - 0.5, 0, img.shape[1] * self.bin, len(self.rows)))
@@ -302,12 +311,25 @@ class ContinuityBars(pg.PlotWidget):
     def on_selection(self) -> None:
         self._update_highlight()
 
+    def on_live(self) -> None:
+        """A running track published frames (or its overlay went): redraw the colours."""
+        self.invalidate(rows=False)
+
     def on_frame(self, frame: int) -> None:
         self.marker.setValue(frame)
 
     def showEvent(self, ev) -> None:
         super().showEvent(ev)
         self.ensure_drawn()
+
+    def paintEvent(self, ev) -> None:
+        live = live_preview.existing(self.session)
+        if live is None or not live.active:
+            super().paintEvent(ev)
+            return
+        t0 = time.perf_counter()
+        super().paintEvent(ev)
+        live.note_paint(time.perf_counter() - t0)      # the live overlay keeps its redraws to a budget
 
     def resizeEvent(self, ev) -> None:
         super().resizeEvent(ev)

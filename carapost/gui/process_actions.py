@@ -45,12 +45,13 @@ class ProcessActions:
     def s(self):
         return self.w.session
 
-    def _run(self, title: str, fn: Callable, cancellable: bool = True, on_done: Callable | None = None) -> bool:
+    def _run(self, title: str, fn: Callable, cancellable: bool = True, on_done: Callable | None = None,
+             preview=None) -> bool:
         """Run ``fn(progress) -> Command | (Command, report) | None`` in the background."""
         if self.s.project is None:
             return False
         return self.w.runner.run(lambda progress: _with_report(fn(progress)), title, on_done=on_done,
-                                 cancellable=cancellable)
+                                 cancellable=cancellable, preview=preview)
 
     # ------------------------------------------------------------- blobs, brims
     def detect_blobs(self, which: str) -> None:
@@ -123,8 +124,11 @@ class ProcessActions:
 
         Tracks the selected points, or every point when none is selected.  After
         [Single Frame] the current frame moves one step in the tracking direction.
+        A [Sequence] shows its frames as they are tracked when the Tracker
+        settings Update Timeline / 2D View Every Frame are on (:mod:`.live_preview`).
         """
         from ..core.tracking import track
+        from . import live_preview
 
         direction, single = TRACK_MODES[mode]
         p, f = self.s.project, self.s.frame
@@ -164,7 +168,8 @@ class ProcessActions:
             if single and cmd.report.get("frames"):
                 self.w.navigate.set_frame(f + direction)
 
-        self._run(title, job, cancellable=not single, on_done=done)
+        self._run(title, job, cancellable=not single, on_done=done,
+                  preview=None if single else live_preview.of(self.s))
 
     # ------------------------------------------------------------- gaps
     def interpolate_gaps(self) -> None:

@@ -16,6 +16,7 @@ from PySide6.QtCore import QObject, Signal
 from ..core.commands import Command
 from ..core.document import Document, Selection
 from ..core.errors import CaraError
+from . import live_preview
 from .framedata import FrameData, gather
 from .imageloader import ImageLoader, open_sources
 
@@ -156,7 +157,8 @@ class Session(QObject):
             return None
         if self._frame_data is None or self._frame_data.frame != self.doc.current_frame:
             self._frame_data = gather(self.project, self.doc.current_frame)
-        return self._frame_data
+        live = live_preview.existing(self)       # a running track's frames (Update 2D View Every Frame)
+        return self._frame_data if live is None else live.frame_data(self._frame_data)
 
     # ----------------------------------------------------------------- commands
     def run(self, command: Command | None) -> bool:

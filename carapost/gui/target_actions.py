@@ -7,7 +7,9 @@ GUI thread (:class:`~carapost.gui.background.BackgroundRunner`): the progress
 bar follows them, its Cancel discards the run (nothing changes), while the
 button that started the run turns into Pause, which stops it and keeps the
 frames tracked so far (one undo step).  The single-frame buttons run at once
-and step the current frame along with the track.
+and step the current frame along with the track.  While a run goes, Update
+Timeline / 2D View Every Frame show its frames as they are tracked
+(:mod:`.live_preview`).
 """
 from __future__ import annotations
 
@@ -15,9 +17,10 @@ import logging
 import threading
 
 import numpy as np
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject
 
 from ..core import target_ops
+from . import live_preview
 
 log = logging.getLogger("carapost")
 
@@ -40,15 +43,11 @@ def screen_to_raw(dx: float, dy: float, rotation: int) -> tuple[float, float]:
 class TargetActions(QObject):
     """Handlers of the Target Tracker (``target.*`` in the action registry)."""
 
-    #: A frame was tracked (queued from the worker to the GUI thread).
-    frameTracked = Signal(int)
-
     def __init__(self, window):
         super().__init__(window)
         self.w = window
         self.running_mode = ""
         self._pause = threading.Event()
-        self.frameTracked.connect(self._show_frame)
 
     @property
     def s(self):
@@ -74,10 +73,6 @@ class TargetActions(QObject):
                 return np.zeros((p.sensors[s].height, p.sensors[s].width), np.uint8)
             return loader.cache.get(src, i)
         return image
-
-    def _show_frame(self, f: int) -> None:
-        if self.running_mode:
-            self.w.navigate.set_frame(f)
 
     def _set_pause(self, mode: str, on: bool) -> None:
         qa = self.w.action(TRACK_ACTIONS[mode])
@@ -106,20 +101,18 @@ class TargetActions(QObject):
             if self.s.attempt(target_ops.track_targets, p, f, mode, images, ids, chans):
                 self.w.navigate.set_frame(f + direction)
             return
-        follow = bool(p.properties["tracker.update_2d_view_every_frame"])
         self._pause.clear()
 
         def job(progress):
             return target_ops.track_targets(p, f, mode, images, ids, chans, progress=progress,
-                                            should_stop=self._pause.is_set,
-                                            on_frame=self.frameTracked.emit if follow else None)
+                                            should_stop=self._pause.is_set)
 
         def done(cmd):
             self.w.navigate.set_frame(cmd.report["last"])
 
         self.running_mode = mode
         self._set_pause(mode, True)
-        started = self.w.runner.run(job, title, on_done=done)
+        started = self.w.runner.run(job, title, on_done=done, preview=live_preview.of(self.s))
         if started:
             self.w.runner.jobFinished.connect(self._finished)
         else:

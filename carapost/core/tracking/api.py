@@ -16,7 +16,7 @@ from ..commands import Command, CompoundCommand
 from ..edits import SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, FACE, SRC_DETECTION, SRC_NONE, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
-from ..progress import Cancelled, Progress
+from ..progress import Cancelled, Progress, frame_payload
 from .engine import FrameTracker
 from .geometry import RigState
 from .params import TrackingParams
@@ -86,6 +86,9 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
         without them only blob matching runs.
     progress : Progress, optional
         One step per frame; on cancel the frames done so far are returned.
+        When it is :attr:`~carapost.core.progress.Progress.publishing`, each
+        frame's results (face points, then brim points, and the frame's
+        cameras) are published as they are found.
     params : TrackingParams, optional
         Default: the project's Tracking Parameters.
     workers : int
@@ -147,12 +150,17 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
     tracker = FrameTracker(RigState(project.rig.cameras_at(start)), X0, uv0, size0, brim, params,
                            images=_image_source(images), pool=pool)
     results, cancelled = [], False
+    face_ids = np.array([q.id for q in face], np.int64)
+    brim_ids = np.array([q.id for q in brim_pts.values()], np.int64)
+    brim_idx = np.array(list(brim_pts), np.int64)
     try:
         for f in frames:
             if progress is not None:
                 progress.check()
             results.append(tracker.step(f, recs_of(f)))
             if progress is not None:
+                if progress.publishing:
+                    _publish(progress, results[-1], face_ids, brim_ids, brim_idx, brim)
                 progress.step(1)
     except Cancelled:
         cancelled = True
@@ -161,6 +169,48 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
     cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd)
     cmd.cancelled = cancelled
     return cmd
+
+
+def _brim_rows(res, idx: np.ndarray, brim) -> dict[str, np.ndarray]:
+    """Point arrays ``(frames, markers, ...)`` of brim markers ``idx`` over the frames of ``res``.
+
+    Their 3D stays on the brim; their 2D samples are the detections the frame's camera solve used.
+    """
+    det = np.array([r.brim_det[idx] for r in res], np.int32)
+    seen = det >= 0
+    nobs = np.count_nonzero(seen, axis=-1)
+    e = np.array([r.brim_err[idx] for r in res])
+    with np.errstate(invalid="ignore"):
+        resid = np.sqrt(np.nansum(e ** 2, axis=-1) / np.maximum(nobs, 1))
+    return {
+        "pos": np.where((nobs > 0)[..., None], brim[idx][None].astype(np.float32), np.nan).astype(np.float32),
+        "status": np.where(nobs >= 2, ST_RECONSTRUCTED, np.where(nobs == 1, ST_SINGLE, ST_NONE)).astype(np.uint8),
+        "residual": np.where(nobs > 0, resid, np.nan).astype(np.float16),
+        "src": np.where(seen, SRC_DETECTION, SRC_NONE).astype(np.uint8),
+        "det": det,
+        "uv": np.array([r.brim_uv[idx] for r in res], np.float32),
+        "score": np.array([r.brim_score[idx] for r in res], np.float16),
+    }
+
+
+def _publish(progress: Progress, r, face_ids: np.ndarray, brim_ids: np.ndarray, brim_idx: np.ndarray,
+             brim) -> None:
+    """Hand frame ``r``'s results (face points, then brim points) to the progress listener."""
+    if len(brim_idx):
+        b = {k: v[0] for k, v in _brim_rows([r], brim_idx, brim).items()}
+        ids = np.concatenate([face_ids, brim_ids])
+
+        def cat(face, key):
+            return np.concatenate([face, b[key]])
+    else:
+        ids = face_ids
+
+        def cat(face, _key):
+            return face
+    progress.publish(r.frame, frame_payload(
+        ids, cat(r.status, "status"), cat(r.src, "src"), cat(r.uv, "uv"), cat(r.score, "score"),
+        pos=cat(r.X, "pos"), residual=cat(r.residual, "residual"), det=cat(r.det, "det"),
+        cameras=(r.R, r.C)))
 
 
 def _command(project, name, face, brim_pts, brim, results, detect_cmd) -> Command:
@@ -185,22 +235,10 @@ def _command(project, name, face, brim_pts, brim, results, detect_cmd) -> Comman
                 "uv": np.array([r.uv[i] for r in res], np.float32),
                 "score": np.array([r.score[i] for r in res], np.float16),
             }))
-        for b, q in brim_pts.items():
-            nobs = np.array([np.count_nonzero(r.brim_det[b] >= 0) for r in res])
-            src = np.array([np.where(r.brim_det[b] >= 0, SRC_DETECTION, SRC_NONE) for r in res], np.uint8)
-            e = np.array([r.brim_err[b] for r in res])
-            with np.errstate(invalid="ignore"):
-                resid = np.sqrt(np.nansum(e ** 2, axis=1) / np.maximum(nobs, 1))
-            resid = np.where(nobs > 0, resid, np.nan).astype(np.float16)
-            pos = np.where((nobs > 0)[:, None], brim[b][None].astype(np.float32), np.nan).astype(np.float32)
-            updates.append((q.id, lo, {
-                "pos": pos,
-                "status": np.where(nobs >= 2, ST_RECONSTRUCTED, np.where(nobs == 1, ST_SINGLE, ST_NONE)).astype(np.uint8),
-                "residual": resid, "src": src,
-                "det": np.array([r.brim_det[b] for r in res], np.int32),
-                "uv": np.array([r.brim_uv[b] for r in res], np.float32),
-                "score": np.array([r.brim_score[b] for r in res], np.float16),
-            }))
+        if brim_pts:
+            rows = _brim_rows(res, np.array(list(brim_pts), np.int64), brim)
+            for j, q in enumerate(brim_pts.values()):
+                updates.append((q.id, lo, {k: np.ascontiguousarray(v[:, j]) for k, v in rows.items()}))
         cmds.append(SetPointData(updates, name="Tracked Points"))
         # One batched conversion (per-matrix calls cost ~0.5 ms a frame); w >= 0 as Camera.quaternion.
         Rs = np.array([[r.R[s] for r in res] for s in range(S)]).reshape(-1, 3, 3)

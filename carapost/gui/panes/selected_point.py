@@ -3,8 +3,10 @@
 The top bar is the point's bar of the Continuity chart (its label at the left),
 then one row per sensor (blob detection, patch track, target track by score,
 keyframes).  The pane is empty when no point or several points are selected,
-and it follows every edit (so it updates while tracking with Update Timeline
-Every Frame).  Clicking a bar goes to the clicked frame.
+and it follows every edit; while a track runs with Update Timeline Every Frame
+it also shows the frames tracked so far, read from the track's live overlay
+(:mod:`carapost.gui.live_preview`) before the project holds them.  Clicking a
+bar goes to the clicked frame.
 """
 from __future__ import annotations
 
