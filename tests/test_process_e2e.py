@@ -14,12 +14,11 @@ from carapost.sample import write_sample
 def test_process_a_sample_take(tmp_path):
     write_sample(tmp_path, markers=35, frames=12, seed=1, workers=1)
     out = tmp_path / "out.cara"
-    # the brim's oblique dots need a lower threshold until the detector's recall improves (issue 5)
     rc = main([
         "process", str(tmp_path / "Sample_0.pico"), "--xcp", str(tmp_path / "calibration.xcp"),
         "--brim-svg", str(tmp_path / "brim.svg"), "--seeds", str(tmp_path / "seeds.json"),
         "-o", str(out), "--c3d", str(tmp_path / "out.c3d"),
-        "--fbx", str(tmp_path / "out.fbx"), "--set", "blob.black_threshold=0.1"])
+        "--fbx", str(tmp_path / "out.fbx")])
     assert rc == 0
     truth = np.load(tmp_path / "truth.npz")["face_xyz"]          # (F, M, 3)
     p = load_project(out)
@@ -29,10 +28,13 @@ def test_process_a_sample_take(tmp_path):
     d0 = np.where(np.isnan(d0), np.inf, d0)
     nearest = d0.argmin(axis=1)
     good = d0[np.arange(len(pts)), nearest] < 1.0
-    assert len(set(nearest[good])) >= 0.8 * truth.shape[1]
+    assert len(set(nearest[good])) >= 0.85 * truth.shape[1]
     err = np.concatenate([np.linalg.norm(pos[i] - truth[:, nearest[i]], axis=1) for i in np.flatnonzero(good)])
     err = err[np.isfinite(err)]
-    assert np.sqrt(np.mean(err ** 2)) < 1.5
+    # No swaps through the opening lip curl and blink (frames 1-11): an eyelid point used to be
+    # patch-tracked onto the closing upper lid's dot, 4 mm off.
+    assert err.max() < 3.0
+    assert np.sqrt(np.mean(err ** 2)) < 0.3
     c3d = read_c3d(tmp_path / "out.c3d")
     assert c3d.positions.shape[:2] == (12, len(p.points))
     fbx = (tmp_path / "out.fbx").read_bytes()

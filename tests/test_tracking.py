@@ -281,3 +281,28 @@ def test_patch_tracking_where_no_blob(quiet, threshold, size, patched):
     else:
         assert not got.any()
     assert p.src[11, s0] == SRC_DETECTION
+
+
+def test_reacquire_picks_the_detections_whose_rays_meet():
+    """A lost point's candidates: its marker in 4 cameras among strays and a neighbour seen by 2."""
+    from carapost.core.tracking.geometry import RigState
+    from carapost.core.tracking.reacquire import best_views
+
+    sc = make_take(35, 2, seed=1, **QUIET)
+    rig = RigState(sc.cameras[0])
+    X = sc.face[0, :2]                                       # the marker and a neighbour
+    uv = rig.project(X)                                      # (2, 4, 2) corrected px
+    rng = np.random.default_rng(0)
+    cands = []
+    for s in range(4):
+        strays = uv[0, s] + rng.uniform(-30, 30, (3, 2))
+        c = [uv[0, s], *strays] + ([uv[1, s]] if s < 2 else [])
+        cands.append(np.array(c)[rng.permutation(len(c))])
+    choice, Xr = best_views(rig, cands, limit=1.0)
+    assert np.all(choice >= 0)
+    assert all(np.allclose(cands[s][choice[s]], uv[0, s]) for s in range(4))
+    assert np.linalg.norm(Xr - X[0]) < 1e-3
+    # Only two cameras see anything that agrees, and two pairs fit equally: ambiguous, nothing taken.
+    two = [np.array([uv[0, 0], uv[1, 0]]), np.array([uv[0, 1], uv[1, 1]]), np.zeros((0, 2)), np.zeros((0, 2))]
+    assert best_views(rig, two, limit=1.0, min_views=2) is None
+    assert best_views(rig, two, limit=1.0) is None

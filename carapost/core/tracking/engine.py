@@ -7,13 +7,14 @@ but never changes it; :mod:`.api` turns the per-frame results into a command.
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
-from . import elastic, patch
+from . import elastic, patch, reacquire
 from .assign import candidates, mutual_best, size_change
 from .geometry import RigState, held_out_errors, refine_poses, reprojection, triangulate
 from .params import TrackingParams
@@ -25,6 +26,8 @@ BRIM_REJECT_PX = 3.0
 #: Pose iterations for the brim solve and for the frame's camera refinement.
 BRIM_ITERATIONS = 2
 BUNDLE_ITERATIONS = 1
+#: A patch track this close (px) to a blob another point holds on the same frame is rejected.
+PATCH_ON_BLOB_PX = 3.0
 #: Held-out view errors above this many robust standard deviations of the frame's are mismatches...
 HELD_OUT_SIGMAS = 8.0
 #: ...but never below this (px), so that a frame of perfect data does not reject sub-pixel noise.
@@ -148,14 +151,16 @@ class FrameTracker:
         meas = np.all(np.isfinite(self.X), axis=1)
         elastic.update_offsets(self.off, self.nb, self.X, meas)
         self.X_last = self.X.copy()
-        self._img_cache: dict = {}
+        self._img_cache: OrderedDict = OrderedDict()
 
     # ------------------------------------------------------------------ helpers
     def _image(self, s, f):
         key = (s, f)
-        if key not in self._img_cache:
-            if len(self._img_cache) > 4 * self.S:
-                self._img_cache.clear()
+        if key in self._img_cache:
+            self._img_cache.move_to_end(key)
+        else:
+            if len(self._img_cache) >= 6 * self.S:
+                self._img_cache.popitem(last=False)
             self._img_cache[key] = self.images(s, f)
         return self._img_cache[key]
 
@@ -310,6 +315,11 @@ class FrameTracker:
             Pi, Si, Di, Dd, ncc = Pi[acc], Si[acc], Di[acc], Dd[acc], ncc[acc]
             det[Pi, Si] = Di
             score[Pi, Si] = np.where(np.isfinite(ncc), ncc, 1.0 - Dd / r2[Pi])
+        # 4b. Lost points whose marker is back but far from the prediction: detections whose rays meet.
+        reacquired = np.zeros(N, bool)
+        if np.any(lost):
+            limit = held_out_limit(err[anchor][valid[anchor]], p.max_allowed_2d_projection_error)
+            reacquired = self._reacquire(fd, rig, X2, lost & ((det >= 0).sum(1) < 2), det, taken, limit)
         valid = det >= 0
         src[valid] = SRC_DETECTION
         for s in range(S):
@@ -318,7 +328,7 @@ class FrameTracker:
             uv_raw[m, s] = fd.raw[s][det[m, s]]
         # 5. Patch tracking where no blob matched.
         if self.images is not None and self.prev_frame is not None:
-            self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score)
+            self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det)
         valid = src != SRC_NONE
         # 6. Triangulate, remove bad 2D projections, refine the cameras (brim fixed), triangulate again.
         X, err = self._triangulate_clean(rig, uv_c, valid, src, det)
@@ -334,7 +344,7 @@ class FrameTracker:
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
         if p.remove_bad_3d_points and np.any(measured):
-            back = lost & (valid.sum(1) >= 3)
+            back = reacquired | (lost & (valid.sum(1) >= 3))
             X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back)
             valid = src != SRC_NONE
         # 8. Single-sensor tracking of points seen by one sensor only.
@@ -383,7 +393,7 @@ class FrameTracker:
                            bdet, buv_raw, bscore, berr)
 
     # --------------------------------------------------------------- sub-steps
-    def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score):
+    def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det):
         p = self.p
         rows, sens = np.nonzero(~valid & np.all(np.isfinite(self.uv_prev), axis=2) & np.all(np.isfinite(uv2), axis=2))
         if len(rows) == 0:
@@ -397,12 +407,51 @@ class FrameTracker:
             jobs.append((self._image(s, self.prev_frame), self.uv_prev[i, s], self._image(s, frame), pred_raw,
                          float(r2[i]), int(p.patch_match_size)))
             keep.append((i, s))
+        # Another point's blob: every dot looks alike, so a patch that slid onto a dot another point
+        # holds this frame (an upper lid closing over the lower lid's marker) is that marker, not this one.
+        held = [fd.raw[s][det[det[:, s] >= 0, s]] for s in range(self.S)]
         for (i, s), (xy, sc) in zip(keep, self.pool.map(patch.track_patch, jobs)):
+            if len(held[s]) and np.min(np.hypot(*(held[s] - xy).T)) < PATCH_ON_BLOB_PX:
+                continue
             if sc >= p.patch_match_threshold:
                 src[i, s] = SRC_PATCH
                 uv_raw[i, s] = xy
                 uv_c[i, s] = rig.cameras[s].correct(xy)
                 score[i, s] = sc
+
+    def _reacquire(self, fd, rig, Xpred, rows, det, taken, limit):
+        """Attach to lost points (``rows``) the free detections of 3+ cameras whose rays agree near their prediction.
+
+        Searches the Face Point Tracking Distance around the prediction; fills
+        ``det`` in place and returns the (N,) mask of points picked up.
+        """
+        N, S = self.N, self.S
+        out = np.zeros(N, bool)
+        rows = rows & np.all(np.isfinite(Xpred), axis=1)
+        if not np.any(rows):
+            return out
+        used = taken.copy()
+        for s in range(S):
+            m = det[:, s] >= 0
+            used[fd.offsets[s] + det[m, s]] = True
+        radius = np.full(N, float(self.p.face_point_tracking_distance))
+        slots = np.repeat(rows[:, None], S, axis=1)
+        Pi, Si, Di, _, _ = self._search(fd, rig, Xpred, radius, slots, used, k=6)
+        for i in np.unique(Pi).tolist():
+            m = Pi == i
+            keep = ~used[fd.offsets[Si[m]] + Di[m]]
+            ss, dd = Si[m][keep], Di[m][keep]
+            found = reacquire.best_views(rig, [fd.xy[s][dd[ss == s]] for s in range(S)], limit)
+            if found is None:
+                continue
+            choice = found[0]
+            det[i] = -1
+            for s in np.flatnonzero(choice >= 0).tolist():
+                d = int(dd[ss == s][choice[s]])
+                det[i, s] = d
+                used[fd.offsets[s] + d] = True
+            out[i] = True
+        return out
 
     def _triangulate_clean(self, rig, uv_c, valid, src, det):
         """Triangulate; with Remove Bad 2D Projections drop the worst view above the limit until all fit."""
