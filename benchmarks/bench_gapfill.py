@@ -167,8 +167,12 @@ def evaluate_file(path: Path, lengths=LENGTHS, trials: int = 30, seed: int = 0, 
     return rows
 
 
-def run(quick: bool = False) -> list[dict]:
-    """Benchmark rows: one per file x gap length (figures, not assertions)."""
+def run(quick: bool = False, seed: int = 0) -> list[dict]:
+    """Benchmark rows: one per file x gap length (figures, not assertions).
+
+    ``seed`` picks the random gaps; check a change on two seeds before
+    believing it (one seed's 30 trials can hinge on one odd stretch of data).
+    """
     if not DATA.is_dir():
         return [{"benchmark": "gapfill", "error": f"{DATA} not found (shared data absent)"}]
     files = sorted(DATA.glob("*.c3d"))
@@ -177,8 +181,8 @@ def run(quick: bool = False) -> list[dict]:
     trials = 5 if quick else 30
     out = []
     for f in files:
-        for r in evaluate_file(f, trials=trials):
-            row = {"benchmark": f"gapfill {r['file']} gap {r['gap']}", "unit": "mm RMS", **r}
+        for r in evaluate_file(f, trials=trials, seed=seed):
+            row = {"benchmark": f"gapfill {r['file']} gap {r['gap']}", "unit": "mm RMS", "seed": seed, **r}
             if r["trials"] == 0:
                 row.update(value=None, target=None, **{"pass": None})
                 out.append(row)
@@ -201,7 +205,8 @@ def run(quick: bool = False) -> list[dict]:
 if __name__ == "__main__":
     import sys
     quick = "--quick" in sys.argv
-    for r in run(quick=quick):
+    seed = int(sys.argv[sys.argv.index("--seed") + 1]) if "--seed" in sys.argv else 0
+    for r in run(quick=quick, seed=seed):
         if r.get("trials"):
             print(f"{r['file'][:40]:40s} gap {r['gap']:4d}  ours {r['ours']:8.3f}  spline {r['spline']:8.3f}  "
                   f"pca {r['pca']:8.3f}  {r['ms_per_fill']:.1f} ms  pass={r['pass']}")

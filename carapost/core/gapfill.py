@@ -28,6 +28,13 @@ rigid motion and smooth for facial deformation:
 4. Where a single-sensor ray is given for a frame, the result is projected
    orthogonally onto the ray, so it re-projects exactly onto that detection.
 
+Beside this neighbour-motion predictor, two low-rank models (the PCA method of
+Gløersen & Federolf 2016, in a frame following the markers' mean translation
+and in one following their rigid motion) predict the gap from every other
+marker, joined to the known samples at the gap's ends.  The three are blended
+by inverse squared error on pseudo-gaps of the same length cut from the
+point's own samples near the gap (:func:`_combined`).
+
 All functions here are pure: arrays in, arrays out.
 """
 from __future__ import annotations
@@ -310,90 +317,161 @@ def _fill_one(pos, present, p, s, e, a, b, k, context, slope_gap):
     return np.einsum("tij,tj->ti", r[nk:], q) + t[nk:]
 
 
-def _lowrank_predict(pos, present, p, s, e, a, b, rigid=True, var_kept=0.999, max_train=1500):
-    """Low-rank (PCA) prediction of ``p`` on ``s..e`` from every marker present there.
+def _pca_markers(present, p, spans, cover, min_others=3):
+    """Markers for the low-rank model of ``p`` applied on the frame ranges ``spans``.
 
-    The markers present on every frame of the gap (and on ``a``, ``b``) and
-    ``p`` are put into a frame that moves rigidly with them (so the PCA models
-    deformation, not head rotation, which a linear model captures badly); a PCA
-    over the training frames (all of them and ``p`` seen; up to ``max_train``
-    nearest the gap) gives the correlation structure (Gløersen & Federolf
-    2016), and ``p`` is reconstructed from the least-squares scores of the
-    others on each gap frame.  The prediction error measured on ``a`` and ``b``
-    is removed with a linear ramp, so the result joins the known samples.
+    Present on every frame of every ``(lo, hi)`` span and on at least
+    ``cover`` of the frames where ``p`` is seen: a marker with many gaps
+    elsewhere would shrink the training set (frames where every chosen marker
+    is present) more than its correlations help.  With fewer than
+    ``min_others`` such markers, the best covered ones.
     """
-    lo = a if a is not None else s
-    hi = b if b is not None else e
-    others = np.flatnonzero(present[lo:hi + 1].all(axis=0))
-    others = others[others != p]
+    there = np.ones(present.shape[1], bool)
+    for lo, hi in spans:
+        there &= present[lo:hi + 1].all(axis=0)
+    there[p] = False
+    others = np.flatnonzero(there)
+    if len(others) == 0:
+        return others
+    seen = present[:, p]
+    c = present[seen][:, others].mean(axis=0) if seen.any() else np.ones(len(others))
+    keep = c >= cover
+    if keep.sum() < min_others:
+        keep = c >= np.sort(c)[::-1][min(min_others, len(c)) - 1]
+    return others[keep]
+
+
+def _lowrank_model(pos, present, p, spans, rigid=True, cover=0.9, sigma=200.0, own_weight=0.02, sv_kept=0.99,
+                   max_train=1000):
+    """Low-rank (PCA) model of ``p`` and the other markers: Gløersen & Federolf (2016).
+
+    As the paper: every marker present over the ``spans`` the model will fill
+    (see :func:`_pca_markers`) in a coordinate frame moving with them
+    (``rigid``: their least-squares rigid motion, which suits a face turning;
+    otherwise their mean translation, which suits markers on several body
+    segments), each coordinate normalised to unit variance over the training
+    frames (every frame where the markers and ``p`` are seen), markers weighted
+    by ``exp(-d^2 / 2 sigma^2)`` of their mean distance ``d`` to ``p`` and
+    ``p`` itself by ``own_weight`` (so the principal vectors describe the
+    others, and ``p``'s loadings are its regression on them), principal
+    vectors up to ``sv_kept`` of the summed singular values.  Takes longer
+    than ``max_train`` training frames are sampled evenly: at capture rates
+    neighbouring frames add little, and the time goes into the covariance.
+
+    Returns a dict for :func:`_lowrank_apply`, or None when too few markers
+    or frames are available.
+    """
+    others = _pca_markers(present, p, spans, cover)
     if len(others) < 3:
         return None
     cols = np.concatenate([others, [p]])
     train = np.flatnonzero(present[:, cols].all(axis=1))
-    if len(train) < max(10, 2 * 3):
+    if len(train) < 10:
         return None
-    if rigid and len(train) > max_train:
-        # The rigid-frame model is local in time (facial expressions come and
-        # go); the translation-frame model, like Gløersen & Federolf's, uses
-        # the whole take.
-        centre = 0.5 * (lo + hi)
-        train = np.sort(train[np.argsort(np.abs(train - centre), kind="stable")[:max_train]])
-    ends = [f for f in (a, b) if f is not None]
-    gap = np.arange(s, e + 1)
-    frames = np.concatenate([train, ends, gap])
-    ref = pos[train][:, others].mean(axis=0)
-    if rigid:
-        r, t = rigid_fit(ref, pos[frames][:, others], np.ones(len(others)))
-    else:
-        # Translation only (the mean marker of each frame), as Gløersen &
-        # Federolf: better when the markers are on several moving segments.
-        r = np.broadcast_to(np.eye(3), (len(frames), 3, 3))
-        t = pos[frames][:, others].mean(axis=1) - ref.mean(axis=0)
-    loc = np.einsum("tji,tkj->tki", r, pos[frames][:, cols] - t[:, None, :])      # R^T (x - t)
-    nt, ne = len(train), len(ends)
-    y = loc[:nt].reshape(nt, -1)
+    if len(train) > max_train:
+        train = train[np.unique(np.linspace(0, len(train) - 1, max_train).round().astype(int))]
+    xs = pos[np.ix_(train, cols)]
+    ref = xs[:, :-1].mean(axis=0)
+    loc, _r, _t = _to_local(xs, ref, rigid)
+    y = loc.reshape(len(train), -1)
     mu = y.mean(0)
     sd = y.std(0)
     sd[sd < 1e-9] = 1.0
-    # Distance weights: markers near p carry its local deformation best.
-    d = np.linalg.norm(ref - np.einsum("tji,tj->ti", r[:nt], pos[train, p] - t[:nt]).mean(0), axis=1)
-    # Rigid frame: scale-free (median distance); translation frame: the
-    # paper's sigma of 200 mm.
-    sig = max(np.median(d), 1e-6) if rigid else 200.0
-    wm = np.exp(-0.5 * (d / sig) ** 2) + (0.05 if rigid else 0.0)
-    wv = np.concatenate([np.repeat(wm, 3), np.ones(3)])
+    d = np.linalg.norm(xs[:, :-1] - xs[:, -1:], axis=-1).mean(axis=0)
+    wv = np.concatenate([np.repeat(np.exp(-0.5 * (d / sigma) ** 2), 3), np.full(3, own_weight)])
     z = (y - mu) / sd * wv
     # Eigen-decomposition of the small covariance rather than an SVD of the
     # long data matrix: same principal vectors, a fraction of the time.
     ev, vec = np.linalg.eigh(z.T @ z)
-    order = np.argsort(ev)[::-1]
-    ev, vec = np.clip(ev[order], 0, None), vec[:, order]
+    ev, vec = np.clip(ev[::-1], 0, None), vec[:, ::-1]
     sv = np.sqrt(ev)
-    var = ev / max(np.sum(ev), 1e-300)
-    k = int(min(np.searchsorted(np.cumsum(var), var_kept) + 1, 3 * len(others) - 1, nt - 1))
-    v = vec[:, :k]                                                 # (3(n+1), k)
-    vo, vp = v[:-3], v[-3:]
-    zq = ((loc[nt:].reshape(len(frames) - nt, -1) - mu) / sd * wv)[:, :-3]
-    # Scores from the other markers only (ridge-regularised least squares).
-    lam = 1e-6 * float(sv[0] ** 2) if len(sv) else 0.0
-    sc = np.linalg.solve(vo.T @ vo + lam * np.eye(k), vo.T @ zq.T).T
-    pred_loc = (sc @ vp.T) / wv[-3:] * sd[-3:] + mu[-3:]
-    pred = np.einsum("tij,tj->ti", r[nt:], pred_loc) + t[nt:]
+    k = int(min(np.searchsorted(np.cumsum(sv) / max(sv.sum(), 1e-300), sv_kept) + 1,
+                3 * len(others) - 1, len(train) - 1))
+    vo = vec[:-3, :k]
+    lam = 1e-12 * float(ev[0]) + 1e-300                 # guards a singular fit only
+    return dict(others=others, cols=cols, rigid=rigid, ref=ref, mu=mu, sd=sd, wv=wv, vo=vo, vp=vec[-3:, :k],
+                gram=vo.T @ vo + lam * np.eye(k))
+
+
+def _to_local(xs, ref, rigid):
+    """Markers ``xs`` (T, n+1, 3; the last the predicted point) in the frame moving with the first n."""
+    if rigid:
+        r, t = rigid_fit(ref, xs[:, :-1], np.ones(len(ref)))
+        return (xs - t[:, None, :]) @ r, r, t                    # R^T (x - t), row vectors
+    t = xs[:, :-1].mean(axis=1) - ref.mean(axis=0)
+    return xs - t[:, None, :], None, t
+
+
+def _lowrank_apply(m, pos, p, s, e, a, b):
+    """Prediction of ``p`` on ``s..e`` by the model ``m`` (:func:`_lowrank_model`) and its misfit.
+
+    The scores on each frame are the least-squares fit of the other markers
+    (the fixed point of the paper's iterative refinement).  The model's error
+    on ``a`` and ``b`` is removed with a linear ramp, so the fill joins the
+    known samples.  The misfit is the RMS residual of the other markers
+    (normalised, weighted) on the gap frames: a pose unlike the training
+    frames, or a glitching marker, shows there.
+    """
+    ends = [f for f in (a, b) if f is not None]
+    gap = np.arange(s, e + 1)
+    frames = np.concatenate([ends, gap])
+    xs = pos[np.ix_(frames, m["cols"])]
+    xs[:, -1] = 0.0                                     # p is unknown on the gap; its column is not used
+    loc, r, t = _to_local(xs, m["ref"], m["rigid"])
+    mu, sd, wv, vo = m["mu"], m["sd"], m["wv"], m["vo"]
+    zq = ((loc.reshape(len(frames), -1) - mu) / sd * wv)[:, :-3]
+    sc = np.linalg.solve(m["gram"], vo.T @ zq.T).T
+    pred = (sc @ m["vp"].T) / wv[-3:] * sd[-3:] + mu[-3:]
+    pred = pred + t if r is None else np.einsum("tij,tj->ti", r, pred) + t
+    ne = len(ends)
+    misfit = float(np.sqrt(np.mean((zq[ne:] - sc[ne:] @ vo.T) ** 2)))
     err = pos[ends, p] - pred[:ne]
     g = pred[ne:]
     if ne == 2:
         u = ((gap - a) / (b - a))[:, None]
-        g = g + err[0] * (1 - u) + err[1] * u
-    else:
-        g = g + err[0]
-    return g
+        return g + err[0] * (1 - u) + err[1] * u, misfit
+    return g + err[0], misfit
 
 
-def _predictors(pos, present, p, s, e, a, b, k, context, slope_gap):
-    """Every predictor's estimate of ``p`` on ``s..e`` (None where one cannot run)."""
-    return [_fill_one(pos, present, p, s, e, a, b, k, context, slope_gap),
-            _lowrank_predict(pos, present, p, s, e, a, b, rigid=True),
-            _lowrank_predict(pos, present, p, s, e, a, b, rigid=False)]
+def _span(s, e, a, b):
+    """Frames a gap ``s..e`` reads: from its known sample before (``a``) to the one after (``b``)."""
+    return (s if a is None else a, e if b is None else b)
+
+
+def _predictors(pos, present, p, s, e, a, b, k, context, slope_gap, models=None):
+    """Every predictor's ``(estimate, misfit)`` for ``p`` on ``s..e`` (None where one cannot run).
+
+    The first low-rank model (translation frame, the paper's) is the one
+    trusted when no pseudo-gap can rank them (see :func:`_combined`); the
+    neighbour-motion predictor has no misfit (None).  ``models``: the two
+    low-rank models, when already built (shared by a gap and its pseudo-gaps).
+    """
+    if models is None:
+        models = [_lowrank_model(pos, present, p, [_span(s, e, a, b)], rigid=rigid) for rigid in (False, True)]
+    fill = _fill_one(pos, present, p, s, e, a, b, k, context, slope_gap)
+    return [None if m is None else _lowrank_apply(m, pos, p, s, e, a, b) for m in models] + \
+        [None if fill is None else (fill, None)]
+
+
+def _pseudo_gaps(present, p, s, e, length, need_a, need_b, count):
+    """Up to ``count`` stretches of ``length`` frames where ``p`` is known, nearest the gap ``s..e``.
+
+    ``p`` is also known one frame either side (only the sides the real gap
+    uses); the stretches do not touch the real gap or each other.
+    """
+    lo_off, hi_off = int(need_a), int(need_b)
+    span = length + lo_off + hi_off
+    run = np.convolve(present[:, p].astype(int), np.ones(span, int), "valid")
+    starts = np.flatnonzero(run == span) + lo_off
+    starts = starts[(starts + length + hi_off < s - 1) | (starts - lo_off > e + 1)]
+    order = np.argsort(np.abs(starts + 0.5 * length - 0.5 * (s + e)), kind="stable")
+    chosen = []
+    for st in starts[order]:
+        if all(abs(st - c) >= length for c in chosen):
+            chosen.append(int(st))
+            if len(chosen) >= count:
+                break
+    return chosen
 
 
 def _combined(pos, present, p, s, e, a, b, k, context, slope_gap, validate):
@@ -403,53 +481,80 @@ def _combined(pos, present, p, s, e, a, b, k, context, slope_gap, validate):
     the low-rank models where markers sit on several segments) and on the gap
     length, so each gap tries them on up to ``validate`` stretches of the same
     length where the point is known, as close to the gap as possible, and
-    weights them by inverse mean squared error there (model averaging).
+    weights them by inverse mean squared error there (model averaging).  In a
+    short take where no such stretch leaves every predictor enough to work on
+    (shorter stretches rank them wrongly: neighbour motion extrapolates well
+    over 7 frames and badly over 30), the paper's low-rank model is used alone.
     """
-    ests = _predictors(pos, present, p, s, e, a, b, k, context, slope_gap)
+    length = e - s + 1
+    need_a, need_b = a is not None, b is not None
+    chosen = _pseudo_gaps(present, p, s, e, length, need_a, need_b, validate) if validate > 0 else []
+    models = None
+    if chosen and 10 * len(chosen) * length <= present[:, p].sum():
+        # A long take: one pair of low-rank models, trained without the
+        # pseudo-gaps, serves the gap and every pseudo-gap (a quarter of the
+        # work; the few frames held out change the model little).
+        held = present.copy()
+        for st in chosen:
+            held[st:st + length, p] = False
+        spans = [_span(s, e, a, b)] + [_span(st, st + length - 1, st - 1 if need_a else None,
+                                             st + length if need_b else None) for st in chosen]
+        models = [_lowrank_model(pos, held, p, spans, rigid=rigid) for rigid in (False, True)]
+    preds = _predictors(pos, present, p, s, e, a, b, k, context, slope_gap, models)
+    ests = [None if q is None else q[0] for q in preds]
     ok = [i for i, g in enumerate(ests) if g is not None]
     if not ok:
         return None
     if len(ok) == 1 or validate <= 0:
         return np.mean([ests[i] for i in ok], axis=0)
-    length = e - s + 1
-    have = present[:, p]
-    # Candidate pseudo-gaps: p known on the pseudo-gap and one frame either
-    # side (only the sides the real gap uses), not touching the real gap.
-    need_a, need_b = a is not None, b is not None
-    lo_off = 1 if need_a else 0
-    hi_off = 1 if need_b else 0
-    run = np.convolve(have.astype(int), np.ones(length + lo_off + hi_off, int), "valid")
-    starts = np.flatnonzero(run == length + lo_off + hi_off) + lo_off
-    starts = starts[(starts + length + hi_off < s - 1) | (starts - lo_off > e + 1)]
-    if len(starts) == 0:
-        return np.mean([ests[i] for i in ok], axis=0)
-    centre = 0.5 * (s + e)
-    order = np.argsort(np.abs(starts + 0.5 * length - centre), kind="stable")
-    chosen = []
-    for st in starts[order]:
-        if all(abs(st - c) >= length for c in chosen):
-            chosen.append(int(st))
-        if len(chosen) >= validate:
-            break
-    sse = np.zeros(len(ests))
+    sse, n_used = np.zeros(len(ests)), 0
+    misfit = np.zeros(len(ests))
     for st in chosen:
         en = st + length - 1
         pr = present.copy()
         pr[st:en + 1, p] = False
-        aa = st - 1 if need_a else None
-        bb = en + 1 if need_b else None
-        trial = _predictors(pos, pr, p, st, en, aa, bb, k, context, slope_gap)
+        trial = _predictors(pos, pr, p, st, en, st - 1 if need_a else None, en + 1 if need_b else None,
+                            k, context, slope_gap, models)
+        if any(trial[i] is None for i in ok):
+            continue                        # ranks only some of them: not comparable
         for i in ok:
-            if trial[i] is None:
-                sse[i] = np.inf
-            else:
-                sse[i] += float(np.sum((trial[i] - pos[st:en + 1, p]) ** 2))
-    good = [i for i in ok if np.isfinite(sse[i])]
-    if not good:
-        return np.mean([ests[i] for i in ok], axis=0)
-    w = np.array([1.0 / max(sse[i], 1e-12) for i in good])
+            sse[i] += float(np.sum((trial[i][0] - pos[st:en + 1, p]) ** 2))
+            if preds[i][1] is not None:
+                misfit[i] += trial[i][1] ** 2
+        n_used += 1
+    if n_used == 0:
+        return ests[ok[0]] if ok[0] == 0 else np.mean([ests[i] for i in ok], axis=0)
+    for i in ok:
+        # A low-rank model that explains the other markers worse on the gap
+        # than on the pseudo-gaps is extrapolating: expect its error to grow
+        # in proportion.
+        if preds[i][1] is not None and misfit[i] > 0:
+            sse[i] *= max(1.0, preds[i][1] ** 2 / (misfit[i] / n_used))
+    ok = _drop_outlier(ests, ok, np.sqrt(min(sse[i] for i in ok) / (n_used * length)))
+    w = np.array([1.0 / max(sse[i], 1e-12) for i in ok])
     w /= w.sum()
-    return np.einsum("i,itc->tc", w, np.stack([ests[i] for i in good]))
+    return np.einsum("i,itc->tc", w, np.stack([ests[i] for i in ok]))
+
+
+def _drop_outlier(ests, ok, err, factor=4.0):
+    """``ok`` without a prediction that disagrees with all the others far beyond their agreement.
+
+    A few pseudo-gaps can rank a predictor well that fails on the real gap
+    (a neighbour frame that extrapolates wildly in a short take); when its RMS
+    distance to every other prediction exceeds ``factor`` times both the
+    others' mutual distance and the best pseudo-gap RMS error ``err``, it is
+    left out of the blend.
+    """
+    if len(ok) < 3:
+        return ok
+    dist = {(i, j): float(np.sqrt(np.mean(np.sum((ests[i] - ests[j]) ** 2, axis=1)))) for i in ok for j in ok if i < j}
+    d = lambda i, j: dist[(min(i, j), max(i, j))]
+    for i in ok:
+        rest = [j for j in ok if j != i]
+        agree = max(d(j, l) for j in rest for l in rest if j < l)
+        if min(d(i, j) for j in rest) > factor * max(agree, err):
+            return rest
+    return ok
 
 
 def _slope(known, q_known, end, side):
