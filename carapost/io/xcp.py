@@ -296,13 +296,15 @@ def read_xcp(path) -> XcpFile:
     # No entity expansion or network access: a calibration file has no business
     # with either, and this keeps hostile XML harmless.
     parser = etree.XMLParser(resolve_entities=False, no_network=True, remove_blank_text=False)
+    # Asked before parsing: libxml2 reports a folder either as an I/O error or as an empty
+    # document, depending on its state.
+    if path.is_dir():
+        raise CaraError("is a folder, not an XCP file", path)
     try:
         tree = etree.parse(str(path), parser)
     except OSError as exc:
         if not path.exists():
             raise CaraError("file not found", path) from None
-        if path.is_dir():
-            raise CaraError("is a folder, not an XCP file", path) from None
         raise CaraError(f"cannot read the file ({exc})", path) from None
     except etree.XMLSyntaxError as exc:
         raise CaraError(f"not a valid XML (XCP) file: {exc.msg}"
