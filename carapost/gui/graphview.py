@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPoint, QRectF, Qt, Signal
+from .continuity import cache_axes
 
 AXIS_COLORS = ((230, 50, 50), (50, 210, 50), (70, 120, 255))   #: x, y, z
 
@@ -74,6 +75,7 @@ class GraphView(pg.PlotWidget):
         self.plotItem.showGrid(x=True, y=True, alpha=0.15)
         self.plotItem.setLabel("bottom", "frame")
         self.plotItem.setLabel("left", "mm / px")
+        cache_axes(self.plotItem)
         self.plotItem.setClipToView(True)
         self.plotItem.setDownsampling(auto=True, mode="peak")
         self.marker = pg.InfiniteLine(angle=90, movable=False, pen=pg.mkPen((255, 255, 0)))
@@ -135,7 +137,9 @@ class GraphView(pg.PlotWidget):
 
     def _curve(self, i: int) -> pg.PlotDataItem:
         while len(self.curves) <= i:
-            c = pg.PlotDataItem(connect="finite", skipFiniteCheck=True)
+            # Long takes: draw at most a few points per pixel column (peaks kept) and only the visible span.
+            c = pg.PlotDataItem(connect="finite", skipFiniteCheck=True, autoDownsample=True, downsampleMethod="peak",
+                                clipToView=True)
             self.plotItem.addItem(c)
             self.curves.append(c)
         return self.curves[i]
