@@ -283,6 +283,34 @@ def test_patch_tracking_where_no_blob(quiet, threshold, size, patched):
     assert p.src[11, s0] == SRC_DETECTION
 
 
+def test_patch_tracking_alone_stops_after_a_few_frames(quiet):
+    """Marker 3 loses its blob in every camera for frames 3-14: patches bridge the first frames only.
+
+    A dot that no camera detects for long has usually left the view (a chin turned away as the jaw
+    opens): patches then slide over bare skin, so the point is dropped and picked up again by blobs.
+    """
+    from carapost.core.tracking.engine import PATCH_ONLY_FRAMES
+
+    m = 3
+    sc = fresh(quiet)
+    for f in range(3, 15):
+        for s in range(4):
+            if sc.face_det[f, s, m] >= 0:
+                remove_marker_detection(sc, f, s, m)
+    cache = {}
+
+    def images(s, f):
+        if (s, f) not in cache:
+            cache[(s, f)] = render(sc, s, f, drop=(m,) if 3 <= f < 15 else ())
+        return cache[(s, f)]
+    track(sc.project, 0, 1, end_frame=20, images=images).do(sc.project)
+    p = marker_point(sc, m)
+    patched = np.any(p.src == SRC_PATCH, axis=1)
+    assert patched[3:3 + PATCH_ONLY_FRAMES].all()
+    assert not patched[3 + PATCH_ONLY_FRAMES:15].any() and np.all(p.status[3 + PATCH_ONLY_FRAMES:15] == ST_NONE)
+    assert p.status[16] != ST_NONE                 # its blobs are back: tracked again
+
+
 def test_reacquire_picks_the_detections_whose_rays_meet():
     """A lost point's candidates: its marker in 4 cameras among strays and a neighbour seen by 2."""
     from carapost.core.tracking.geometry import RigState

@@ -26,6 +26,8 @@ BRIM_REJECT_PX = 3.0
 #: Pose iterations for the brim solve and for the frame's camera refinement.
 BRIM_ITERATIONS = 2
 BUNDLE_ITERATIONS = 1
+#: Frames a point may go on by patch tracking alone, without a blob in any view.
+PATCH_ONLY_FRAMES = 5
 #: A patch track this close (px) to a blob another point holds on the same frame is rejected.
 PATCH_ON_BLOB_PX = 3.0
 #: Held-out view errors above this many robust standard deviations of the frame's are mismatches...
@@ -151,6 +153,7 @@ class FrameTracker:
         meas = np.all(np.isfinite(self.X), axis=1)
         elastic.update_offsets(self.off, self.nb, self.X, meas)
         self.X_last = self.X.copy()
+        self.patch_run = np.zeros(self.N, int)           # frames in a row without a blob in any view
         self._img_cache: OrderedDict = OrderedDict()
 
     # ------------------------------------------------------------------ helpers
@@ -329,6 +332,15 @@ class FrameTracker:
         # 5. Patch tracking where no blob matched.
         if self.images is not None and self.prev_frame is not None:
             self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det)
+        # Patches bridge short blob dropouts (blur, a lash over the dot); a point with no blob in any
+        # view for longer is no longer seen (a chin turned away): its patches drift over bare skin.
+        no_blob = ~np.any(src == SRC_DETECTION, axis=1)
+        self.patch_run = np.where(no_blob, self.patch_run + 1, 0)
+        stale = no_blob & (self.patch_run > PATCH_ONLY_FRAMES)
+        if np.any(stale):
+            src[stale] = SRC_NONE
+            uv_c[stale] = np.nan
+            uv_raw[stale] = np.nan
         valid = src != SRC_NONE
         # 6. Triangulate, remove bad 2D projections, refine the cameras (brim fixed), triangulate again.
         X, err = self._triangulate_clean(rig, uv_c, valid, src, det)
