@@ -9,8 +9,10 @@ images) run on the same frames.
   at the default Blob Parameters (threshold 0.4).  A detection within 1.5 px of a
   visible marker's centre (face or brim) is a hit (one per marker); any other
   detection is false (nostrils, pupils, brows, hair, lips, brim edges), except
-  within 6 px of a marker drawn but partly covered.  RMS is of the 2-D centre
-  error of hits.  ``blobs_{c}_brim_recall``: the same for the brim's dots alone.
+  within 6 px of a marker drawn but partly covered or too faint to see (black paint on a
+  dense black eyebrow: ``faint`` in the rows).  RMS is of the 2-D centre
+  error of hits.  ``blobs_{c}_brim_recall``: the same for the brim's dots alone.  The
+  recall rows list the markers missed by name (``missed``).
 - ``blobs_{black,white}_clutter_{recall,precision,rms}``: the same on 1280x720
   frames of :func:`~carapost.core.blobs.synth.render` (120 markers, 14 confusers:
   more clutter than a face), markers near a hidden one excepted within 10 px.
@@ -94,10 +96,14 @@ def accuracy(white: bool, data, prefix: str = "", hidden_px: float = 6.0) -> lis
     """Recall, precision and centre RMS of ours and SimpleBlobDetector's on ``data`` (SynthImage list)."""
     sbd = simple_blob_detector(white)
     tot = {"ours": [0, 0, 0, [], 0, 0], "sbd": [0, 0, 0, [], 0, 0]}
+    missed: dict[str, int] = {}
     for s in data:
         r = detect(s.image, white=white)
         for key, pts in (("ours", np.stack([r["x"], r["y"]], 1).astype(float)), ("sbd", sbd_points(sbd, s.image))):
             hit, f, e = match_truth(pts, s, hidden_px=hidden_px)
+            if key == "ours" and s.names is not None:
+                for k in np.flatnonzero(~hit):
+                    missed[s.names[k]] = missed.get(s.names[k], 0) + 1
             t = tot[key]
             t[0] += int(hit.sum())
             t[1] += f
@@ -114,9 +120,11 @@ def accuracy(white: bool, data, prefix: str = "", hidden_px: float = 6.0) -> lis
         figs[key] = (h / max(h + m, 1), h / max(h + f, 1), float(np.sqrt((e ** 2).sum(1).mean())) if len(e) else np.nan,
                      bh / max(bn, 1), bn)
     o, b = figs["ours"], figs["sbd"]
-    extra = {"frames": len(data), "markers": int(sum(len(s.centres) for s in data)), "load_average": os.getloadavg()[0]}
+    extra = {"frames": len(data), "markers": int(sum(len(s.centres) for s in data)), "load_average": os.getloadavg()[0],
+             "faint": int(sum(len(s.faint) for s in data if s.faint is not None))}
     out.append(_row(f"blobs_{c}_recall", o[0], "fraction", ">= 0.995", o[0] >= 0.995,
-                    baseline="SimpleBlobDetector", baseline_value=b[0], **extra))
+                    baseline="SimpleBlobDetector", baseline_value=b[0],
+                    missed=dict(sorted(missed.items(), key=lambda kv: -kv[1])), **extra))
     out.append(_row(f"blobs_{c}_precision", o[1], "fraction", ">= 0.98", o[1] >= 0.98,
                     baseline="SimpleBlobDetector", baseline_value=b[1], **extra))
     out.append(_row(f"blobs_{c}_rms", o[2], "px", "<= 0.08", o[2] <= 0.08,

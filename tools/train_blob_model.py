@@ -56,7 +56,10 @@ def sample_takes(white: bool, scenes: int, seed: int):
     """Frames of ``carapost sample`` takes: 3 frames x 4 cameras per scene, varied noise and blur.
 
     Its faces, brim and lighting are what the accuracy benchmark measures on; the
-    takes' seeds start at 1000 so the benchmark's (0-2) are never trained on.
+    takes' seeds start at 1000 so the benchmark's (0-5) are never trained on.  Dots
+    the paint does not show (black on a dense black eyebrow: ``faint``) are with the
+    hidden ones, so candidates on them are neither positives (they look like brow
+    hair, and taught stage 1 that hair is a dot) nor negatives.
     """
     rng = np.random.default_rng([seed, int(white), 7])
     out = []

@@ -47,7 +47,8 @@ SLOPE_K = 4.0
 #: Weight of the radial-symmetry centre in the blend (the rest is the inside map's centroid).
 MIX = 0.3
 #: Names of the per-blob measurements :func:`measure` returns in ``extra`` (stage 2 of the classifier sees them).
-MEASURE_NAMES = ("contrast", "line_rms", "sharpness", "border_std", "slope", "fill", "edge_share")
+MEASURE_NAMES = ("contrast", "line_rms", "sharpness", "border_std", "slope", "fill", "edge_share", "background",
+                 "core_std")
 
 
 def window_for(radius: np.ndarray) -> np.ndarray:
@@ -173,7 +174,9 @@ def measure(patches: np.ndarray, r0: np.ndarray, noise: float, passes: int = PAS
     extra : ndarray (N, len(MEASURE_NAMES))
         Contrast, RMS distance of the gradient lines from the centre (px), edge sharpness
         (1/px), background residual, background slope x radius / contrast, fill of the
-        moment ellipse, share of the window's gradient energy on the blob's edge.
+        moment ellipse, share of the window's gradient energy on the blob's edge, the
+        background plane's level at the centre, and the spread of the values inside the
+        blob's core (the inner 0.6 of its moment ellipse) over the contrast.
     """
     N, n, _ = patches.shape
     h = n // 2
@@ -224,6 +227,15 @@ def measure(patches: np.ndarray, r0: np.ndarray, noise: float, passes: int = PAS
     angle = 0.5 * np.degrees(np.arctan2(2 * mxy, mxx - myy))
     angle = (angle + 90.0) % 180.0 - 90.0
     fill = m0 / np.maximum(np.pi * major * minor / 4.0, 1e-6)
+    # The core: 0.6 of the moment ellipse (q = 1 on a uniform ellipse's edge).  Paint is
+    # uniform there; a pupil has the lights' glints in it, a brow clump has gaps.
+    mdet = np.maximum(mxx * myy - mxy * mxy, 1e-6)
+    q = (myy[:, None] * dx * dx - 2 * mxy[:, None] * dx * dy + mxx[:, None] * dy * dy) / (4.0 * mdet[:, None])
+    core = (q < 0.36).astype(np.float32)
+    nc = np.maximum(core.sum(1), 1.0)
+    cmean = _dot(core, D) / nc
+    core_std = np.sqrt(np.maximum(_dot(core, D * D) / nc - cmean * cmean, 0.0)) / a
+    background = plane[:, 0] + plane[:, 1] * cx + plane[:, 2] * cy
     wt = _taper(np.hypot(G.GX - cx[:, None], G.GY - cy[:, None]), r)
     g = np.sqrt(g2)
     wg2 = _dot(wt, g2)
@@ -234,5 +246,5 @@ def measure(patches: np.ndarray, r0: np.ndarray, noise: float, passes: int = PAS
     slope = np.hypot(plane[:, 1], plane[:, 2]) * r / a
     ok = (np.isfinite(cx) & np.isfinite(cy) & (np.abs(cx) < h - 1.5) & (np.abs(cy) < h - 1.5)
           & (a_n > 0.5 * noise))
-    extra = np.stack([a, line_rms, sharp, border_std, slope, fill, edge_share], 1)
+    extra = np.stack([a, line_rms, sharp, border_std, slope, fill, edge_share, background, core_std], 1)
     return cx.astype(np.float64), cy.astype(np.float64), major, minor, angle, ok, extra

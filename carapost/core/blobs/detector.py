@@ -36,6 +36,7 @@ class Candidates:
     radius: np.ndarray     #: half-contrast radius estimate, full-resolution px
     noise: float           #: image noise estimate, grey levels
     feats: np.ndarray      #: (N, F) features
+    white: bool = False    #: white blobs (searched on the image) or black (on the inverted image)
 
 
 def as_grey_u8(image) -> np.ndarray:
@@ -93,11 +94,12 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
         lv_all.append(np.full(len(xs), level, np.int8))
     if not f_all:
         z = np.zeros(0)
-        return Candidates(z, z, z.astype(np.int8), z, noise, np.zeros((0, len(fe.FEATURE_NAMES)), np.float32)), bright
+        return Candidates(z, z, z.astype(np.int8), z, noise, np.zeros((0, len(fe.FEATURE_NAMES)), np.float32),
+                          bool(white)), bright
     F = np.concatenate(f_all)
     lv = np.concatenate(lv_all)
     return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv,
-                      fe.profile_radius(F) * 2.0 ** lv, noise, F), bright
+                      fe.profile_radius(F) * 2.0 ** lv, noise, F, bool(white)), bright
 
 
 #: Rounds of measurement; each re-centres the window on the last answer and sizes it by the last major axis.
@@ -242,7 +244,10 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     ok &= minor > 0.5
     h, w = bright.shape
     ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
-    contrast, line_rms, sharp, border_std, slope, fill, edge_share = extra.T
+    contrast, line_rms, sharp, border_std, slope, fill, edge_share, background, core_std = extra.T
+    # The skin's light at the blob: the background on the image (white blobs) or 255 less it
+    # on the inverted image (black ones).
+    light = background if cand.white else 255.0 - background
     r = np.maximum(0.5 * major, 0.5)
     F = np.zeros((len(sel), len(FIT_FEATURE_NAMES)), np.float32)
     F[:, 0] = np.clip(logit1[sel], -30, 30)
@@ -256,6 +261,8 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     F[:, 8] = np.clip(fill, 0, 5)
     F[:, 9] = np.clip(edge_share, 0, 1)
     F[:, 10] = np.clip(moved / np.maximum(cand.radius[sel], 1.0), 0, 5)
+    F[:, 11] = np.clip(contrast / np.maximum(light, 1.0), 0, 5)
+    F[:, 12] = np.clip(core_std, 0, 5)
     return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F)
 
 

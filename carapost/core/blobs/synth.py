@@ -32,6 +32,12 @@ class SynthImage:
         Centres of markers drawn but mostly occluded (neither required nor false).
     brim : ndarray (N,) of bool, optional
         Which of ``centres`` are brim markers (sample-take frames only).
+    faint : ndarray (K, 2), optional
+        Centres of markers in view whose paint barely changes the image (sample-take
+        frames only: black dots on a dense black eyebrow); they are also in ``hidden``.
+    names, faint_names : list of str, optional
+        Labels of ``centres`` and of ``faint`` (sample-take frames only: ``Brow_L_2``,
+        ``Nose_Tip``, ..., the brim's ``Brim_<i>``).
     """
 
     image: np.ndarray
@@ -39,6 +45,9 @@ class SynthImage:
     axes: np.ndarray
     hidden: np.ndarray
     brim: np.ndarray | None = None
+    faint: np.ndarray | None = None
+    names: list | None = None
+    faint_names: list | None = None
 
 
 def _ellipse_coverage(h, w, cx, cy, a, b, ang, ss=4):
@@ -247,7 +256,9 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
     The same renderer as ``carapost sample`` (:mod:`carapost.sample`): a face with
     painted dots, brows, eyes, lips, hair and the brim with its printed dots, under
     the helmet's lights.  ``centres`` are the visible markers (face and brim);
-    markers drawn but partly covered are ``hidden`` (neither required nor false).
+    markers drawn but partly covered are ``hidden`` (neither required nor false), and
+    so are the ``faint`` ones: in view, but their paint barely changes the image
+    (:data:`FAINT`; black dots painted on a dense black eyebrow look like the brow).
 
     Parameters
     ----------
@@ -270,17 +281,61 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
 
     kw = {k: float(v) for k, v in (("noise", noise), ("blur", blur)) if v is not None}
     sc = build_scene(markers=markers, frames=max(1, (frames - 1) * step + 1), seed=seed, white=white, **kw)
+    labels = np.array(list(sc.markers.labels) + [f"Brim_{i}" for i in range(sc.n_brim)])
     out = []
     for f in range(0, frames * step, step):
         g = frame_geometry(sc, f)
         cams = true_cameras(sc, f)
         for c in cameras:
             img, tr = render_view(sc, g, cams[c], c, f, leds=leds_of(cams))
+            # The same view without paint (same noise stream): what each dot changes.
+            bare, _ = render_view(sc, g, cams[c], c, f, leds=leds_of(cams), markers=False)
             brim = np.zeros(len(tr.uv), bool)
             brim[len(tr.uv) - sc.n_brim:] = True
-            s = SynthImage(img, tr.uv[tr.visible], tr.axes[tr.visible], tr.uv[tr.drawn & ~tr.visible])
-            s.brim = brim[tr.visible]
+            vis = np.flatnonzero(tr.visible)
+            paint = paint_contrast(img, bare, tr.uv[vis], tr.axes[vis], white)
+            # Thin dots (edge-on) are left required: blur spreads their paint, so their mean change is low.
+            faint = (paint < FAINT * np.median(paint)) & (tr.axes[vis, 1] >= 1.5) if len(vis) else np.zeros(0, bool)
+            keep = vis[~faint]
+            hidden = np.concatenate([tr.uv[tr.drawn & ~tr.visible], tr.uv[vis[faint]]])
+            s = SynthImage(img, tr.uv[keep], tr.axes[keep], hidden, brim[keep], tr.uv[vis[faint]],
+                           labels[keep].tolist(), labels[vis[faint]].tolist())
             out.append(s)
+    return out
+
+
+#: A dot in view is "faint" (not required, not false) when its paint changes the grey level inside it by
+#: less than this fraction of the view's median: black paint on a dense black eyebrow changes it by
+#: 0-25 grey levels where every other black dot of the sample takes changes it by 48-150 (median 105).
+#: Only dots of minor semi-axis >= 1.5 px can be faint.
+FAINT = 0.25
+
+
+def paint_contrast(image: np.ndarray, bare: np.ndarray, uv: np.ndarray, axes: np.ndarray, white: bool) -> np.ndarray:
+    """Mean change of the grey level the paint makes inside each dot (positive towards the paint's colour).
+
+    Parameters
+    ----------
+    image, bare : ndarray (H, W)
+        The view with and without the painted dots (same noise).
+    uv : ndarray (N, 2)
+        Dot centres (x, y).
+    axes : ndarray (N, 2)
+        Semi-axes (major, minor), px: the mean is over the disc of 0.6 x the minor semi-axis
+        (at least 1 px), which lies inside the dot whatever its orientation.
+    white : bool
+        White paint (brighter) or black (darker).
+    """
+    diff = (image.astype(np.float32) - bare.astype(np.float32)) * (1.0 if white else -1.0)
+    h, w = diff.shape
+    out = np.zeros(len(uv))
+    for k, ((x, y), (_a, b)) in enumerate(zip(np.asarray(uv, float), np.asarray(axes, float))):
+        r = max(1.0, 0.6 * b)
+        x0, x1 = max(0, int(np.floor(x - r))), min(w, int(np.ceil(x + r)) + 1)
+        y0, y1 = max(0, int(np.floor(y - r))), min(h, int(np.ceil(y + r)) + 1)
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        m = np.hypot(xx - x, yy - y) <= r
+        out[k] = diff[y0:y1, x0:x1][m].mean() if m.any() else 0.0
     return out
 
 
