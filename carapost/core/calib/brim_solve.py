@@ -23,6 +23,7 @@ from ..commands import Command, CompoundCommand
 from ..edits import AddPoints, SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, SRC_DETECTION, SRC_NONE, ST_RECONSTRUCTED, ST_SINGLE
+from .nearest import nearest_with_clearance
 
 #: RMS (px) above which the attached detections do not fit the brim.
 FIT_TOLERANCE_PX = 6.0
@@ -171,13 +172,8 @@ def match_markers(cameras, markers, det_xy, used, known_det, gate=MATCH_GATE_PX,
         proj = cam.project(markers)
         d = np.linalg.norm(proj[:, None] - xy[None], axis=-1)
         d = np.where(np.isfinite(d), d, np.inf)
-        dfree = np.where(free[None], d, np.inf)
-        best = np.argmin(dfree, axis=1)
-        bd = dfree[np.arange(len(markers)), best]
         # Clearance against every detection (used ones too): a crowded spot is ambiguous.
-        d2 = d.copy()
-        d2[np.arange(len(markers)), best] = np.inf
-        second = d2.min(axis=1)
+        best, bd, second = nearest_with_clearance(d, np.where(free[None], d, np.inf))
         # A detection claimed by two markers goes to neither.
         cand = (det[:, s] < 0) & (bd <= gate) & (second > clearance * gate)
         idx, counts = np.unique(best[cand], return_counts=True)

@@ -24,6 +24,7 @@ from ..edits import AddPoints, SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, FACE, SRC_DETECTION, SRC_NONE, ST_NONE, ST_RECONSTRUCTED
 from .bundle import bundle_cameras
+from .nearest import nearest_with_clearance
 
 #: Dilation (px) of the brim's projected convex hull.
 BRIM_MARGIN_PX = 12.0
@@ -316,11 +317,7 @@ def _attach_more(pts, cams, xy, blocked):
             continue
         dist = np.linalg.norm(proj[rows][:, None] - xy[s][None], axis=-1)
         dist = np.where(avail[None], dist, np.inf)
-        best = np.argmin(dist, axis=1)
-        bd = dist[np.arange(len(rows)), best]
-        d2 = dist.copy()
-        d2[np.arange(len(rows)), best] = np.inf
-        clear = d2.min(axis=1)
+        best, bd, clear = nearest_with_clearance(dist)
         # Every point's projection near the detection (ambiguity between points).
         pd = np.linalg.norm(proj[:, None] - xy[s][None][:, best], axis=-1)
         for k, r in enumerate(rows):
