@@ -183,12 +183,12 @@ def run(quick: bool = False, log=None) -> list[dict]:
         dist.append(int(k) - src.gop_start(int(k)) + 1)
     cpu = time.process_time() - cpu
     lat = np.asarray(lat)
-    results.append(_result("media.random_access", lat.mean(), "ms", "< 40", np.percentile(lat, 95) < 40,
+    results.append(_result("media.random_access", lat.mean(), "ms", "< 40", float(lat.max()) < 40,
                            p95_ms=round(float(np.percentile(lat, 95)), 2), max_ms=round(float(lat.max()), 2),
                            cpu_ms_mean=round(cpu * 1000 / len(lat), 2),
                            frames_decoded_mean=round(float(np.mean(dist)), 1),
                            detail=f"{tag}; mean of {len(lat)} random frames, each decoded from its I-frame "
-                                  f"(GOP {GOP}); pass = p95 under target"))
+                                  f"(GOP {GOP}); pass = slowest under target"))
 
     # Stepping back one frame once its GOP is cached.
     cache = FrameCache(max_mb=256)
