@@ -91,3 +91,20 @@ def test_rendered_sample_lips_are_not_cross_matched(tmp_path):
     assert lips <= set().union(*markers_of)
     for s in range(4):
         assert np.linalg.norm(np.asarray(pr.rig.camera(s, 0).position) - truth["cam_t"][0, s]) < 0.3
+
+
+def test_a_view_pulled_off_its_dot_is_left_out():
+    """Leave-one-out: one view 1 px off (a detection pulled by a shadow beside the dot) is detached;
+    views within blob noise, and 2-view points, are kept."""
+    from carapost.core.calib.init3d import odd_views_out
+
+    sc = make_scene(35, seed=2)
+    cams = sc.cameras[0]
+    rng = np.random.default_rng(0)
+    X = sc.face[0][:20]
+    uv = np.stack([c.project(X) for c in cams], axis=1) + rng.normal(0, 0.05, (20, 4, 2))
+    uv[5, 2] += (0.8, -0.6)                 # 1 px off in camera 2
+    uv[9, 0] += (1.0, 0.0)                  # 1 px off, but the point has only 2 views
+    uv[9, 1:3] = np.nan
+    bad = odd_views_out(cams, uv)
+    assert bad[5, 2] and bad.sum() == 1, np.argwhere(bad)

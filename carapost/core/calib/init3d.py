@@ -35,6 +35,12 @@ ATTACH_GATE_PX = 2.0
 ATTACH_CLEARANCE_PX = 5.0
 #: Observations farther than this (px) from the bundled point are detached.
 REJECT_PX = 2.0
+#: A view of a 3+-view point is an outlier when the point made from its other views reprojects this far
+#: (px) from it while those views agree within LOO_AGREE_PX (blob centres are good to ~0.1 px: a view
+#: 1 px off is a detection pulled by something beside the dot, and a least-squares point shares its
+#: error out among the good views).
+LOO_PX = 0.6
+LOO_AGREE_PX = 0.25
 #: A candidate pair is supported by another camera with a detection this close (px) to its projection...
 SUPPORT_GATE_PX = 3.0
 #: ...and a candidate without that support counts as this much farther from its epipolar line (px).
@@ -240,9 +246,10 @@ def initialize_3d(project, frame: int, params: dict | None = None):
                                                                              np.zeros(len(X), bool)],
                                        np.concatenate([buv, uv]))
         err = err[len(bX):]
+        loo = odd_views_out(cams, uv)
         for k, d in enumerate(pts):
             d["X"] = Xo[len(bX) + k]
-            bad = np.isfinite(err[k]) & (err[k] > REJECT_PX)
+            bad = (np.isfinite(err[k]) & (err[k] > REJECT_PX)) | loo[k]
             if d["id"] is None:     # seeds keep what the user attached
                 d["uv"][bad] = np.nan
                 d["det"][bad] = -1
@@ -256,6 +263,47 @@ def initialize_3d(project, frame: int, params: dict | None = None):
     err = err[len(bX):]
     Xo = Xo[len(bX):]
     return _command(project, frame, pts, Xo, err, cams, recs)
+
+
+def odd_views_out(cams, uv: np.ndarray) -> np.ndarray:
+    """Which views of each point the other views disagree with (leave one out).
+
+    Parameters
+    ----------
+    cams : list of Camera
+    uv : numpy.ndarray, shape (N, S, 2)
+        Raw pixels, NaN where a point has no view.
+
+    Returns
+    -------
+    numpy.ndarray of bool, shape (N, S)
+        At most one view per point: the one whose leave-one-out reprojection
+        error exceeds ``LOO_PX`` while the point from the other views fits
+        them within ``LOO_AGREE_PX`` (points with 3+ views only).
+    """
+    n, S = uv.shape[:2]
+    seen = np.isfinite(uv[..., 0])
+    out_err = np.zeros((n, S))
+    fit_err = np.full((n, S), np.inf)
+    many = seen.sum(1) >= 3
+    for s in range(S):
+        rows = np.flatnonzero(many & seen[:, s])
+        if not len(rows):
+            continue
+        held = uv[rows].copy()
+        held[:, s] = np.nan
+        X = triangulate_many(cams, held)
+        proj = np.stack([cams[c].project(X) for c in range(S)], axis=1)
+        e = np.linalg.norm(proj - uv[rows], axis=2)
+        out_err[rows, s] = e[:, s]
+        others = np.where(seen[rows] & (np.arange(S) != s), e, 0.0)
+        fit_err[rows, s] = others.max(axis=1)
+    cand = (out_err > LOO_PX) & (fit_err <= LOO_AGREE_PX)
+    worst = np.argmax(np.where(cand, out_err, -1.0), axis=1)
+    bad = np.zeros((n, S), bool)
+    has = cand.any(axis=1)
+    bad[np.flatnonzero(has), worst[has]] = True
+    return bad
 
 
 def _merge(pts, dist):
