@@ -238,10 +238,15 @@ class CaraProcess:
         self.document.run(clear_2d_to_rom_correspondences(self.project))
 
     def solve_rom_camera(self, sensor: int | None = None) -> None:
-        """ROM Tools > Solve ROM Camera From Correspondences (4+ in one channel; the ROM's rig follows it)."""
+        """ROM Tools > Solve ROM Camera From Correspondences (4+ in one channel).
+
+        The other ROM cameras follow it, or stay where they are when they already fit the take's brim.
+        """
         from ..core.rom_ops import solve_rom_camera_from_correspondences
 
-        self.document.run(solve_rom_camera_from_correspondences(self.project, sensor))
+        cmd = solve_rom_camera_from_correspondences(self.project, sensor)
+        self.document.run(cmd)
+        log.info(cmd.summary)
 
     def solve_rom_face_alignment(self, frame: int | None = None) -> None:
         """ROM Tools > Solve ROM Face Alignment From Correspondences (3+ face point correspondences)."""

@@ -41,6 +41,11 @@ OUTLIER_FACTOR = 3.0
 MIN_BRIM_MARKERS = 4
 #: Displacements closer than this (px) vote together for a camera's image shift.
 SHIFT_BANDWIDTH_PX = 4.0
+#: A projected brim marker "lands on" a detection this close (px): how well a camera pose fits a frame.
+LANDING_PX = 5.0
+#: The ROM face is tracked again from where the first pass found it when it sat this far off (mm, largest
+#: displacement of its points by the rigid motion): closer, the first pass's candidates were not confused.
+FACE_REALIGN_MM = 1.0
 
 
 def identity() -> np.ndarray:
@@ -103,8 +108,11 @@ class RomFrame:
     cameras: list
 
 
-def rom_frame(rom, frame: int, rig_T: np.ndarray | None = None, face_T: np.ndarray | None = None) -> RomFrame:
+def rom_frame(rom, frame: int, rig_T: np.ndarray | None = None, face_T: np.ndarray | None = None,
+              cam_T=None) -> RomFrame:
     """Read ``frame`` of the ROM project ``rom`` (see :class:`RomFrame`).
+
+    ``rig_T`` moves every camera, then ``cam_T`` (one motion per camera, or None) each camera on its own.
 
     Raises
     ------
@@ -133,6 +141,8 @@ def rom_frame(rom, frame: int, rig_T: np.ndarray | None = None, face_T: np.ndarr
     cams = rom.rig.cameras_at(frame)
     if rig_T is not None:
         cams = move_cameras(cams, rig_T)
+    if cam_T is not None:
+        cams = [move_cameras([c], T)[0] for c, T in zip(cams, cam_T)]
     if face_T is not None:
         X = apply_motion(face_T, X)
     return RomFrame([p.id for p in face], [p.label for p in face], X, size, brim_ids,
@@ -282,6 +292,52 @@ def _enough(uv: np.ndarray) -> None:
                         "ROM Brim Point Tracking Distance")
 
 
+def face_motion(X_rom: np.ndarray, X_take: np.ndarray, ok: np.ndarray, rounds: int = 3) -> np.ndarray | None:
+    """The rigid motion carrying the ROM face ``X_rom`` onto the points found in the take, robustly.
+
+    A least-squares fit (:func:`~carapost.core.stabilize.kabsch`) on the points
+    found (``ok``), refitted without those farther than three times the median
+    error (and 1 mm) from it: expressions differ a little, mismatches a lot.
+
+    Returns
+    -------
+    ndarray (4, 4) or None
+        None with fewer than 6 points found.
+    """
+    from .stabilize import kabsch
+
+    use = np.asarray(ok, bool) & np.all(np.isfinite(X_take), axis=1) & np.all(np.isfinite(X_rom), axis=1)
+    T = None
+    for _ in range(rounds):
+        if np.count_nonzero(use) < 6:
+            return T
+        Rt = kabsch(X_rom[use], X_take[use])
+        T = motion(Rt[:, :3], Rt[:, 3])
+        err = np.linalg.norm(apply_motion(T, X_rom) - X_take, axis=1)
+        keep = use & (err <= max(1.0, 3.0 * float(np.median(err[use]))))
+        if np.array_equal(keep, use):
+            break
+        use = keep
+    return T
+
+
+def motion_size(T: np.ndarray, X: np.ndarray) -> float:
+    """The largest displacement (mm) of the points ``X`` under the motion ``T``."""
+    X = np.asarray(X, float).reshape(-1, 3)
+    return float(np.max(np.linalg.norm(apply_motion(T, X) - X, axis=1), initial=0.0))
+
+
+def brim_landings(camera: Camera, markers: np.ndarray, xy: np.ndarray, tol: float = LANDING_PX) -> int:
+    """How many brim markers projected by ``camera`` land within ``tol`` px of a detection ``xy`` (D, 2)."""
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    pred = camera.project(np.asarray(markers, float).reshape(-1, 3))
+    pred = pred[np.all(np.isfinite(pred), axis=1)]
+    if len(xy) == 0 or len(pred) == 0:
+        return 0
+    d, _ = cKDTree(xy).query(pred, distance_upper_bound=float(tol))
+    return int(np.count_nonzero(np.isfinite(d)))
+
+
 # ----------------------------------------------------------------------------- ROM Tools
 def solve_camera_pnp(camera: Camera, X: np.ndarray, uv: np.ndarray) -> Camera:
     """One camera's pose from 4 or more 3D-2D correspondences (raw pixels), starting from its pose.
@@ -390,4 +446,4 @@ def used_detections(points, frame: int, recs: list, kinds=(FACE,)) -> list[np.nd
 
 __all__ = ["RomFrame", "rom_frame", "rom_point_position", "project_all", "match_brim", "robust_rig_fit",
            "solve_camera_pnp", "solve_face_alignment", "rig_motion", "move_cameras", "apply_motion", "motion",
-           "identity", "detections_xy", "used_detections"]
+           "identity", "detections_xy", "used_detections", "brim_landings", "face_motion", "motion_size"]

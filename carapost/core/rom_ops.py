@@ -79,6 +79,8 @@ class RomState:
     correspondences : tuple of Correspondence
     rig_T, face_T : ndarray (4, 4)
         World motions of the ROM's cameras and of its face (ROM Tools solves).
+    cam_T : tuple of ndarray (4, 4)
+        Empty, or one motion per camera applied after ``rig_T``: cameras moved on their own.
     """
 
     path: str
@@ -86,6 +88,7 @@ class RomState:
     correspondences: tuple = ()
     rig_T: np.ndarray = field(default_factory=R.identity)
     face_T: np.ndarray = field(default_factory=R.identity)
+    cam_T: tuple = ()
 
 
 def _read_rom(path: str | Path) -> Project:
@@ -131,12 +134,15 @@ def rom_tools_json(project: Project) -> dict | None:
     if state is None or state.path != project.rom_path:
         return getattr(project, SAVED_TOOLS_ATTR, None) if project.rom_path else None
     if not state.correspondences and np.array_equal(state.rig_T, R.identity()) \
-            and np.array_equal(state.face_T, R.identity()):
+            and np.array_equal(state.face_T, R.identity()) and not state.cam_T:
         return None
-    return {"correspondences": [[c.rom_point, c.sensor, c.frame, c.detection, list(c.uv)]
-                                for c in state.correspondences],
-            "rig_T": np.asarray(state.rig_T, float).ravel().tolist(),
-            "face_T": np.asarray(state.face_T, float).ravel().tolist()}
+    out = {"correspondences": [[c.rom_point, c.sensor, c.frame, c.detection, list(c.uv)]
+                               for c in state.correspondences],
+           "rig_T": np.asarray(state.rig_T, float).ravel().tolist(),
+           "face_T": np.asarray(state.face_T, float).ravel().tolist()}
+    if state.cam_T:
+        out["cam_T"] = [np.asarray(T, float).ravel().tolist() for T in state.cam_T]
+    return out
 
 
 def set_saved_rom_tools(project: Project, d: dict | None) -> None:
@@ -151,7 +157,8 @@ def _restored(state: RomState, d: dict | None) -> RomState:
                  for a, s, f, det, uv in d.get("correspondences", []))
     return replace(state, correspondences=corr,
                    rig_T=np.asarray(d.get("rig_T", R.identity().ravel()), float).reshape(4, 4),
-                   face_T=np.asarray(d.get("face_T", R.identity().ravel()), float).reshape(4, 4))
+                   face_T=np.asarray(d.get("face_T", R.identity().ravel()), float).reshape(4, 4),
+                   cam_T=tuple(np.asarray(T, float).reshape(4, 4) for T in d.get("cam_T", [])))
 
 
 class SetRomState(Command):
@@ -205,7 +212,7 @@ def rom_parameters(project: Project) -> dict:
 
 
 def _frame_of(project: Project, state: RomState) -> R.RomFrame:
-    return R.rom_frame(state.rom, rf_index(project), state.rig_T, state.face_T)
+    return R.rom_frame(state.rom, rf_index(project), state.rig_T, state.face_T, state.cam_T or None)
 
 
 def _take_cameras(project: Project, rom_cams) -> list:
@@ -319,6 +326,9 @@ def initialize_from_rom(project: Project, frame: int, brim_only: bool = False, i
         raise CaraError(f"frame {frame}: {e}; increase ROM Brim Point Tracking Distance "
                         f"({rp['rom_brim_point_tracking_distance']:g} px), choose a closer ROM Frame Index, or "
                         "align the ROM with Process > ROM Tools > Solve ROM Camera From Correspondences") from None
+    weak = _weak_channels(sol.det)
+    if weak:
+        log.warning(_weak_message(frame, sol.det, weak))
     progress.step(1)
     # The take gets the ROM's brim and cameras when it has none (or another brim: its brim points then
     # stand for other markers, so new ones are made).
@@ -330,7 +340,7 @@ def initialize_from_rom(project: Project, frame: int, brim_only: bool = False, i
         pre.append(SetRig(CameraRig([c.copy() for c in rom.rig.cameras], project.frame_count), name="Set Cameras"))
     bp = {} if new_brim else brim_points(project)
     face_cmds, report = None, {"brim_markers": int(np.count_nonzero(np.any(sol.det >= 0, axis=1))), "points": 0,
-                               "labelled": 0, "rms_px": sol.rms}
+                               "labelled": 0, "rms_px": sol.rms, "weak_channels": weak}
     if not brim_only:
         sol, face_cmds = _face(project, frame, state, rf, sol, recs, rp, report)
     progress.step(1)
@@ -346,9 +356,34 @@ def initialize_from_rom(project: Project, frame: int, brim_only: bool = False, i
     cmd.summary = (f"{name}: frame {frame} from ROM frame {rp['rom_frame_index']} of {Path(state.path).name}, "
                    f"{report['brim_markers']} brim markers"
                    + ("" if brim_only else f", {report['points']} of {len(rf.ids)} face points "
-                      f"({report['labelled']} labelled)") + f", RMS {report['rms_px']:.2f} px")
+                      f"({report['labelled']} labelled)") + f", RMS {report['rms_px']:.2f} px"
+                   + (f"; the face sat up to {report['face_moved_mm']:g} mm off its ROM place in the brim and was "
+                      "tracked again from there" if "face_moved_mm" in report else "")
+                   + (f"; channels {', '.join(map(str, weak))} matched too few brim markers (see the warning)"
+                      if weak else ""))
     progress.step(1)
     return cmd
+
+
+def _weak_channels(det: np.ndarray) -> list[int]:
+    """Channels that matched fewer than :data:`~carapost.core.rom.MIN_BRIM_MARKERS` brim markers while another
+    matched at least twice that many: their camera has most likely moved relative to the rest since the ROM."""
+    n = np.count_nonzero(det >= 0, axis=0)
+    if n.max(initial=0) < 2 * R.MIN_BRIM_MARKERS:
+        return []
+    return [int(s) for s in np.flatnonzero(n < R.MIN_BRIM_MARKERS)]
+
+
+def _weak_message(frame: int, det: np.ndarray, weak: list[int]) -> str:
+    n = np.count_nonzero(det >= 0, axis=0)
+    which = ", ".join(f"channel {s}: {n[s]}" for s in weak)
+    others = ", ".join(str(int(v)) for s, v in enumerate(n) if s not in weak)
+    ch = weak[0]
+    return (f"Initialize from ROM: frame {frame}: too few ROM brim markers matched a detection ({which}; the other "
+            f"channels {others} of {det.shape[0]}): that camera has probably moved since the ROM and its pose "
+            f"here is unreliable.  Undo, then for channel {ch} click 4 or more ROM brim points and their "
+            "detections (Process > ROM Tools > Add 2D To ROM Correspondence, Ctrl+L), run ROM Tools > Solve ROM "
+            "Camera From Correspondences, and Initialize from ROM again")
 
 
 def _face(project, frame, state, rf, sol, recs, rp, report):
@@ -366,9 +401,23 @@ def _face(project, frame, state, rf, sol, recs, rp, report):
     if already:
         log.warning(f"Initialize from ROM: frame {frame} already has {already} face points; this run adds a "
                     "second, independent set of points (Edit > Undo removes it)")
-    tracker = FrameTracker(RigState(sol.cameras), rf.X, np.full((N, S, 2), np.nan), rf.size, rf.markers,
-                           _params(project, rp))
-    res = tracker.step(frame, recs)
+    params = _params(project, rp)
+
+    def track_from(X0):
+        return FrameTracker(RigState(sol.cameras), X0, np.full((N, S, 2), np.nan), rf.size, rf.markers,
+                            params).step(frame, recs)
+
+    res, X_ref = track_from(rf.X), rf.X
+    # The face may sit elsewhere in the brim than in the ROM (the helmet put on again): dense markers
+    # (the lips) then have a neighbour as close as their own blob and the first pass leaves them.  The
+    # points it did find tell where the face is: track again from the ROM face moved there.
+    M = R.face_motion(rf.X, res.X, res.status != ST_NONE)
+    if M is not None and R.motion_size(M, rf.X) > R.FACE_REALIGN_MM:
+        X_moved = R.apply_motion(M, rf.X)
+        again = track_from(X_moved)
+        if np.count_nonzero(again.status != ST_NONE) >= np.count_nonzero(res.status != ST_NONE):
+            res, X_ref = again, X_moved
+            report["face_moved_mm"] = round(R.motion_size(M, rf.X), 2)
     # Bundle Current Frame on the brim (fixed) and the face points seen twice or more.
     bobs = res.brim_det >= 0
     multi = np.count_nonzero(res.src != SRC_NONE, axis=1) >= 2
@@ -382,9 +431,9 @@ def _face(project, frame, state, rf, sol, recs, rp, report):
     X = res.X.copy()
     X[frows] = Xo[len(brows):]
     # Points still far from where their ROM neighbours put them are mismatches.
-    nb = elastic.neighbours(rf.X)
+    nb = elastic.neighbours(X_ref)
     off = np.full(nb.shape + (3,), np.nan)
-    elastic.update_offsets(off, nb, rf.X, np.ones(N, bool))
+    elastic.update_offsets(off, nb, X_ref, np.ones(N, bool))
     have = res.status != ST_NONE
     pred, _ = elastic.predict(X, have, nb, off)
     dev = np.linalg.norm(X - pred, axis=1)
@@ -493,9 +542,12 @@ def solve_rom_camera_from_correspondences(project: Project, sensor: int | None =
     """ROM Tools > Solve ROM Camera From Correspondences.
 
     The camera of the channel with 4 or more correspondences (the one with the
-    most, or ``sensor``) is solved by PnP from them; the rest of the ROM's rig
-    follows it rigidly, so Initialize from ROM starts from cameras that see the
-    take as it is.
+    most, or ``sensor``) is solved by PnP from them.  Each other camera then
+    either follows it rigidly (the whole helmet moved: the rig's relative
+    placement is kept) or stays where it is (only this camera was knocked, as
+    the guide's "correspondences for only the camera channel that has the
+    misalignment" implies): whichever puts more of the ROM brim on this
+    frame's detections in that camera's channel (:func:`~carapost.core.rom.brim_landings`).
 
     Raises
     ------
@@ -517,10 +569,38 @@ def solve_rom_camera_from_correspondences(project: Project, sensor: int | None =
     after = float(np.sqrt(np.nanmean(np.sum((new.project(X) - uv) ** 2, axis=1))))
     M = R.rig_motion(cams[s], new)
     moved = float(np.linalg.norm(new.position - cams[s].position))
-    return _with(state, "Solve ROM Camera From Correspondences",
-                 f"Solve ROM Camera From Correspondences: channel {s} from {len(items)} correspondences, "
-                 f"error {before:.1f} -> {after:.2f} px, the ROM rig moved {moved:.1f} mm",
-                 rig_T=M @ state.rig_T)
+    follow = _followers(project, rf, cams, M, s, int(np.bincount([k.frame for k in items]).argmax()))
+    head = (f"Solve ROM Camera From Correspondences: channel {s} from {len(items)} correspondences, "
+            f"error {before:.1f} -> {after:.2f} px, the camera moved {moved:.1f} mm")
+    name = "Solve ROM Camera From Correspondences"
+    if all(follow) and not state.cam_T:
+        return _with(state, name, head + ", the rest of the ROM rig with it", rig_T=M @ state.rig_T)
+    old = state.cam_T or tuple(R.identity() for _ in cams)
+    stay = [o for o in range(len(cams)) if not follow[o]]
+    moved_too = [o for o in range(len(cams)) if follow[o] and o != s]
+    tail = (f"; channels {', '.join(map(str, stay))} stay (the ROM brim lands on their detections as they are)"
+            + (f", channels {', '.join(map(str, moved_too))} move with it" if moved_too else ""))
+    return _with(state, name, head + tail, cam_T=tuple(M @ T if follow[o] else T for o, T in enumerate(old)))
+
+
+def _followers(project: Project, rf: R.RomFrame, cams: list, M: np.ndarray, s: int, frame: int) -> list[bool]:
+    """Per camera, whether it moves with camera ``s`` (by ``M``): it fits ``frame``'s brim detections better so.
+
+    A channel where neither pose puts a brim marker on a detection follows
+    (nothing says the rig did not move as a whole).
+    """
+    recs = [project.detections[o].frame(frame) for o in range(len(cams))]
+    xy = R.detections_xy(recs)
+    out = []
+    for o, cam in enumerate(cams):
+        if o == s:
+            out.append(True)
+            continue
+        moved = R.move_cameras([cam], M)[0]
+        n_stay = R.brim_landings(cam, rf.markers, xy[o])
+        n_move = R.brim_landings(moved, rf.markers, xy[o])
+        out.append(n_move > n_stay or n_move == n_stay == 0)
+    return out
 
 
 def rf_index(project: Project) -> int:

@@ -32,6 +32,13 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--take", default="Sample", help="take name: <take>_<channel>.pico (default Sample)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: one per CPU, at most 4)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    g = p.add_argument_group("a second take of the same face (for Initialize from ROM)")
+    g.add_argument("--motion-seed", type=int, default=None,
+                   help="seed of the motion only: the same face, markers, rig and brim as --seed, another take")
+    g.add_argument("--rig-move", default=None, metavar="MM,DEG",
+                   help="the helmet (cameras and brim) put on again shifted MM mm and turned DEG degrees")
+    g.add_argument("--camera-move", default=None, metavar="CHANNEL,MM,DEG",
+                   help="one camera moved MM mm and turned DEG degrees relative to the rest of the rig")
 
 
 def run(args) -> int:
@@ -44,6 +51,8 @@ def run(args) -> int:
         w, h = (int(v) for v in str(args.size).lower().split("x"))
     except ValueError:
         raise CaraError(f"--size must be WIDTHxHEIGHT, not {args.size!r}") from None
+    rig_move = _numbers(args.rig_move, 2, "--rig-move", "MM,DEG") if args.rig_move else (0.0, 0.0)
+    camera_move = _numbers(args.camera_move, 3, "--camera-move", "CHANNEL,MM,DEG") if args.camera_move else None
     last = [-1]
 
     def progress(done, total, message=""):
@@ -53,7 +62,8 @@ def run(args) -> int:
             last[0] = pct
 
     info = write_sample(args.out_dir, markers=args.markers, frames=args.frames, seed=args.seed, white=args.white,
-                        width=w, height=h, take=args.take, workers=args.workers, progress=progress)
+                        width=w, height=h, take=args.take, workers=args.workers, progress=progress,
+                        motion_seed=args.motion_seed, rig_move=rig_move, camera_move=camera_move)
     if not args.quiet and sys.stderr.isatty():
         print(file=sys.stderr)
     print(f"sample take: {info['frames']} frames, {info['markers']} face markers, {info['brim_markers']} brim "
@@ -63,6 +73,18 @@ def run(args) -> int:
     for key in ("calibration", "truth_cameras", "brim_svg", "labels", "seeds", "truth_c3d", "truth_npz"):
         print(f"  {info[key]}")
     return 0
+
+
+def _numbers(text: str, n: int, flag: str, form: str) -> tuple:
+    from carapost.core.errors import CaraError
+
+    try:
+        values = tuple(float(v) for v in str(text).split(","))
+    except ValueError:
+        values = ()
+    if len(values) != n:
+        raise CaraError(f"{flag} must be {form}, not {text!r}")
+    return values
 
 
 def main(argv=None) -> int:

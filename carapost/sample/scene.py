@@ -17,6 +17,7 @@ from .face import (BAND, EXPRESSIONS, EYE_HALF, EYE_U, EYE_V, EYELID_A, EYELID_T
                    MOUTH_V, FaceBasis, eyelid_params, inside_face)
 from .markers import SURF_FACE, SURF_LID_L, SURF_LID_R, MarkerSet, layout_markers
 from .motion import HEAD_PIVOT, Motion, make_motion
+from .remount import move_camera, remount_head, rigid_move
 from .rig import (BRIM_MARKERS, BRIM_RADIUS, BRIM_RIG_R, BRIM_RIG_T, BRIM_SIZE, RigGeometry, calibration_error,
                   make_rig, world_camera)
 from .texture import Atlas, make_atlas
@@ -165,6 +166,8 @@ class Scene:
         The placement error of ``calibration.xcp`` (world frame, about the camera centroid).
     paint : ndarray, shape (P,)
         Albedo of each marker's paint (face markers, then the brim's printed dots).
+    motion_seed, rig_move, camera_move :
+        The second-take options of :func:`build_scene` (``None``, ``(0, 0)``, ``None``: the seed's own take).
     """
 
     width: int
@@ -184,6 +187,9 @@ class Scene:
     calib_dt: np.ndarray
     paint: np.ndarray
     marker_basis: FaceBasis = field(repr=False, default=None)
+    motion_seed: int | None = None
+    rig_move: tuple = (0.0, 0.0)
+    camera_move: tuple | None = None
 
     @property
     def raster_scale(self) -> int:
@@ -205,7 +211,8 @@ _RING = np.concatenate([[[0.0, 0.0]], 1.3 * np.column_stack([np.cos(_PHI), np.si
 
 
 def build_scene(markers: int = 100, frames: int = 120, seed: int = 0, white: bool = False, width: int = 1280,
-                height: int = 720, rate: float = 60.0, noise: float = 2.0, blur: float = 0.8) -> Scene:
+                height: int = 720, rate: float = 60.0, noise: float = 2.0, blur: float = 0.8,
+                motion_seed: int | None = None, rig_move=(0.0, 0.0), camera_move=None) -> Scene:
     """Draw a sample take.
 
     Parameters
@@ -222,6 +229,14 @@ def build_scene(markers: int = 100, frames: int = 120, seed: int = 0, white: boo
         Sensor noise, grey levels.
     blur : float
         Optical blur, Gaussian sigma in pixels.
+    motion_seed : int, optional
+        Seed of the motion (expressions, gaze, slip, flex) instead of ``seed``: another take of the
+        same face, markers, rig and brim (:mod:`.remount`).
+    rig_move : (float, float)
+        ``(mm, degrees)``: the helmet (cameras and brim) put on the head again, shifted and turned
+        relative to the face (random directions, exact magnitudes).
+    camera_move : (int, float, float), optional
+        ``(channel, mm, degrees)``: that camera moved relative to the rest of the rig and the brim.
 
     Returns
     -------
@@ -232,11 +247,16 @@ def build_scene(markers: int = 100, frames: int = 120, seed: int = 0, white: boo
     if width < 64 or height < 64 or width % 2 or height % 2:
         raise ValueError(f"image size {width}x{height}: need even sizes of at least 64")
     ms = layout_markers(int(markers), rng_for(seed, 1))
-    motion = make_motion(rng_for(seed, 2), int(frames), rate)
+    motion = make_motion(rng_for(seed if motion_seed is None else motion_seed, 2), int(frames), rate)
     rig = make_rig(rng_for(seed, 3), int(width), int(height))
+    # The directions of a move come from the second take's own seed, so that two takes differ.
+    move_seed = seed if motion_seed is None else motion_seed
     atlas = make_atlas(rng_for(seed, 4), bool(white), ms.p[ms.surface == SURF_FACE])
     centres_w = (rig.centres - BRIM_RIG_T) @ BRIM_RIG_R
     dR, dt = calibration_error(rng_for(seed, 5), centres_w)
+    if camera_move is not None:
+        ch, mm, deg = camera_move
+        rig = move_camera(rig, int(ch), *rigid_move(rng_for(move_seed, 9), mm, deg))
     face = ms.surface == SURF_FACE
     # Skin markers: centre, u +- eps, v +- eps, then the 8 ring points.
     r = ms.radius[face, None]
@@ -245,13 +265,20 @@ def build_scene(markers: int = 100, frames: int = 120, seed: int = 0, white: boo
     ring_u = ms.p[face, 0:1] + r * _RING[1:, 0][None, :]
     ring_v = ms.p[face, 1:2] + r * _RING[1:, 1][None, :]
     mb = FaceBasis(np.concatenate([pu, ring_u], axis=1).ravel(), np.concatenate([pv, ring_v], axis=1).ravel())
+    if rig_move[0] or rig_move[1]:
+        # About the neutral face's centre (its markers' mean), in rig (= head rest) coordinates.
+        centre = mb.pose(np.zeros(len(EXPRESSIONS))).reshape(int(face.sum()), 13, 3)[:, 0].mean(axis=0)
+        motion = remount_head(motion, *rigid_move(rng_for(move_seed, 8), *rig_move), centre)
     # Paint: black (albedo ~0.05) or white (~0.9), a little uneven from dot to dot.
     mean, sd = (0.82, 0.02) if white else (0.05, 0.012)
     paint = np.clip(mean + sd * rng_for(seed, 7).standard_normal(len(ms)), 0.01, 0.98)
     paint = np.concatenate([paint, np.full(len(BRIM_MARKERS), 0.85 if white else 0.04)])
     return Scene(width=int(width), height=int(height), frames=int(frames), rate=float(rate), seed=int(seed),
                  white=bool(white), noise=float(noise), blur=float(blur), markers=ms, rig=rig, motion=motion,
-                 atlas=atlas, mesh=_build_mesh(), calib_dR=dR, calib_dt=dt, paint=paint, marker_basis=mb)
+                 atlas=atlas, mesh=_build_mesh(), calib_dR=dR, calib_dt=dt, paint=paint, marker_basis=mb,
+                 motion_seed=motion_seed, rig_move=tuple(float(v) for v in rig_move),
+                 camera_move=None if camera_move is None else (int(camera_move[0]), float(camera_move[1]),
+                                                               float(camera_move[2])))
 
 
 @dataclass

@@ -177,7 +177,8 @@ def _render_pool(scene: Scene, paths: list[Path], lossless: bool, metadata: list
     q = ctx.Queue()
     done = 0
     params = dict(markers=len(scene.markers), frames=scene.frames, seed=scene.seed, white=scene.white,
-                  width=scene.width, height=scene.height, rate=scene.rate, noise=scene.noise, blur=scene.blur)
+                  width=scene.width, height=scene.height, rate=scene.rate, noise=scene.noise, blur=scene.blur,
+                  motion_seed=scene.motion_seed, rig_move=scene.rig_move, camera_move=scene.camera_move)
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                              initargs=(params, q)) as ex:
         futs = [ex.submit(_worker, c, str(paths[c]), lossless, metadata[c]) for c in range(4)]
@@ -314,7 +315,8 @@ def _write_text(path: Path, text: str) -> None:
 
 def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 0, white: bool = False,
                  width: int = 1280, height: int = 720, take: str = "Sample", lossless: bool = True,
-                 progress=None, workers: int | None = None, noise: float = 2.0, blur: float = 0.8) -> dict:
+                 progress=None, workers: int | None = None, noise: float = 2.0, blur: float = 0.8,
+                 motion_seed: int | None = None, rig_move=(0.0, 0.0), camera_move=None) -> dict:
     """Render a synthetic four-camera take with its ground truth into ``out_dir``.
 
     Parameters
@@ -341,6 +343,15 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
         Worker processes (default: one per CPU, at most 4); 1 renders in this process.
     noise, blur : float
         Sensor noise (grey levels) and optical blur (px).
+    motion_seed : int, optional
+        Another take of the same face, markers, rig and brim (a ROM workflow's second take): the
+        motion comes from this seed instead of ``seed``.
+    rig_move : (float, float)
+        ``(mm, degrees)``: the helmet put on again, cameras and brim shifted and turned together
+        relative to the face.
+    camera_move : (int, float, float), optional
+        ``(channel, mm, degrees)``: one camera moved relative to the rest of the rig and the brim
+        (``calibration.xcp`` and ``truth_cameras.xcp`` show it where it is).
 
     Returns
     -------
@@ -367,7 +378,8 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
         raise CaraError(f"--frames must be at least 1, not {frames}")
     try:
         scene = build_scene(markers=markers, frames=frames, seed=seed, white=white, width=width, height=height,
-                            noise=noise, blur=blur)
+                            noise=noise, blur=blur, motion_seed=motion_seed, rig_move=rig_move,
+                            camera_move=camera_move)
     except ValueError as e:
         raise CaraError(str(e)) from None
     if workers is None:
@@ -451,10 +463,23 @@ def _write_truth(scene: Scene, truth: dict, points: np.ndarray, out: Path) -> di
         param=scene.markers.p, weights=scene.motion.weights, expressions=np.array(EXPRESSIONS),
         gaze=scene.motion.gaze, head_R=scene.motion.head_R, head_t=scene.motion.head_t,
         cam_R=R, cam_t=t, calib_dR=scene.calib_dR, calib_dt=scene.calib_dt,
-        rate=scene.rate, seed=scene.seed, white=scene.white, size=np.array([scene.width, scene.height]))
+        rate=scene.rate, seed=scene.seed, white=scene.white, size=np.array([scene.width, scene.height]),
+        **_second_take_keys(scene))
     os.replace(tmp, p)
     files["truth_npz"] = str(p)
     return files
+
+
+def _second_take_keys(scene: Scene) -> dict:
+    """truth.npz entries of a second take's options (none for a take of the seed's own: files stay as they were)."""
+    out = {}
+    if scene.motion_seed is not None:
+        out["motion_seed"] = scene.motion_seed
+    if any(scene.rig_move):
+        out["rig_move"] = np.array(scene.rig_move)
+    if scene.camera_move is not None:
+        out["camera_move"] = np.array(scene.camera_move)
+    return out
 
 
 def _write_c3d(path: Path, pos: np.ndarray, labels: list[str], rate: float, masks: np.ndarray) -> None:
