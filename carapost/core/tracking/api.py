@@ -148,7 +148,7 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
                 size0[i, s] = (recs0[s][d]["major"], recs0[s][d]["minor"])
     pool = PatchPool(workers)
     tracker = FrameTracker(RigState(project.rig.cameras_at(start)), X0, uv0, size0, brim, params,
-                           images=_image_source(images), pool=pool)
+                           images=_image_source(images), pool=pool, start_frame=start)
     results, cancelled = [], False
     face_ids = np.array([q.id for q in face], np.int64)
     brim_ids = np.array([q.id for q in brim_pts.values()], np.int64)

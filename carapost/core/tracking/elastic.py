@@ -6,6 +6,14 @@ measured.  A face deforms smoothly, so a point's position is predicted as
 the median over its measured neighbours of (neighbour + offset): this follows
 the head, the jaw and a blink with the neighbours, and brings a point lost
 during an occlusion back to where its marker reappears.
+
+Not every neighbour moves with a point: a lower lip's nearest markers are half
+on the jaw, half on the upper lip, and a plain median of the two groups leaves
+it half way while the jaw is open (and, with offsets refreshed open, half way
+again once it closes).  So each offset also keeps how much it has changed from
+frame to frame (:func:`update_offsets` with ``motion``), and the prediction is
+a weighted median that trusts the neighbours whose offsets stayed steady: once
+the jaw has moved, the lower lip follows the chin, not the nose.
 """
 from __future__ import annotations
 
@@ -16,6 +24,11 @@ from scipy.spatial import cKDTree
 K_NEIGHBOURS = 6
 #: Fewest measured neighbours for a prediction.
 MIN_NEIGHBOURS = 2
+#: Offset change (mm) per frame below which neighbours count as moving together: noise, and a
+#: slow drift, must not let one neighbour outweigh the others before anything has moved.
+STEADY_MM = 0.3
+#: Weights within this ratio of each other count as equal (the plain median, which costs less).
+UNEVEN = 1.5
 
 
 def neighbours(X: np.ndarray, k: int = K_NEIGHBOURS) -> np.ndarray:
@@ -30,15 +43,36 @@ def neighbours(X: np.ndarray, k: int = K_NEIGHBOURS) -> np.ndarray:
     return out
 
 
-def update_offsets(off: np.ndarray, nb: np.ndarray, X: np.ndarray, measured: np.ndarray) -> None:
-    """Refresh ``off`` (N, K, 3) in place where a point and its neighbour are both measured."""
+def update_offsets(off: np.ndarray, nb: np.ndarray, X: np.ndarray, measured: np.ndarray,
+                   motion: np.ndarray | None = None) -> None:
+    """Refresh ``off`` (N, K, 3) in place where a point and its neighbour are both measured.
+
+    Parameters
+    ----------
+    motion : ndarray (N, K, 2), optional
+        Running (sum of squared offset changes in mm², number of changes) per
+        neighbour, updated in place where an offset already known is refreshed;
+        :func:`weights` turns it into the prediction's weights.
+    """
     Xn = X[np.maximum(nb, 0)]
     both = measured[:, None] & (nb >= 0) & measured[np.maximum(nb, 0)]
-    off[both] = (X[:, None, :] - Xn)[both]
+    new = X[:, None, :] - Xn
+    if motion is not None:
+        had = both & np.all(np.isfinite(off), axis=2)
+        change = np.sum((new - off) ** 2, axis=2)
+        motion[had, 0] += change[had]
+        motion[had, 1] += 1
+    off[both] = new[both]
+
+
+def weights(motion: np.ndarray) -> np.ndarray:
+    """(N, K) weight of each neighbour: the inverse of its offset's mean squared change (plus the steady floor)."""
+    mean_sq = motion[..., 0] / np.maximum(motion[..., 1], 1)
+    return 1.0 / (mean_sq + STEADY_MM ** 2)
 
 
 def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarray,
-            min_neighbours: int = MIN_NEIGHBOURS) -> tuple[np.ndarray, np.ndarray]:
+            min_neighbours: int = MIN_NEIGHBOURS, weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Median over available neighbours of (neighbour position + offset).
 
     Parameters
@@ -47,6 +81,9 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
         Neighbour positions to predict from.
     available : ndarray (N,) bool
         Which rows of ``X`` may be used.
+    weight : ndarray (N, K), optional
+        Per-neighbour weights (:func:`weights`): a weighted median per
+        coordinate; None gives every neighbour the same say.
 
     Returns
     -------
@@ -61,13 +98,29 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
     count = use.sum(axis=1)
     pred = np.full((len(X), 3), np.nan)
     ok = count >= min_neighbours
-    if np.any(ok):
-        c = cand[ok]
-        # Median via sort: NaNs sort last, so the middle of the first `count` entries.
-        srt = np.sort(c, axis=1)
-        n = count[ok]
-        lo = (n - 1) // 2
-        hi = n // 2
-        r = np.arange(len(c))
-        pred[ok] = 0.5 * (srt[r, lo] + srt[r, hi])
+    if not np.any(ok):
+        return pred, count
+    c = cand[ok]
+    # Median via sort: NaNs sort last, so the middle of the first `count` entries.
+    srt = np.sort(c, axis=1)
+    n = count[ok]
+    r = np.arange(len(c))
+    med = 0.5 * (srt[r, (n - 1) // 2] + srt[r, n // 2])
+    if weight is not None:
+        # Weighted median per coordinate where the weights differ (near the jaw, once it has moved):
+        # the vote that minimises the weighted sum of distances to all votes (the mean of the
+        # minimisers when two tie, as the plain median of an even count does).
+        u = use[ok]
+        wk = weight[ok]
+        uneven = np.where(u, wk, 0.0).max(1) > UNEVEN * np.where(u, wk, np.inf).min(1)
+        if np.any(uneven):
+            uu = u[uneven][:, None, :]                                            # (m, 1, K)
+            v = np.where(uu, c[uneven].transpose(0, 2, 1), 0.0)                  # (m, 3, K)
+            w = np.where(uu, wk[uneven][:, None, :], 0.0)
+            cost = (np.abs(v[..., :, None] - v[..., None, :]) @ w[..., None])[..., 0]
+            cost = np.where(uu, cost, np.inf)
+            best = cost.min(axis=2, keepdims=True)
+            tie = cost <= best + 1e-9 * (1.0 + best)
+            med[uneven] = (v * tie).sum(axis=2) / tie.sum(axis=2)
+    pred[ok] = med
     return pred, count

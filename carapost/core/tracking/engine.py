@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from . import elastic, patch, reacquire
 from .assign import candidates, mutual_best, size_change
-from .geometry import RigState, held_out_errors, refine_poses, reprojection, triangulate
+from .geometry import RigState, depth_uncertainty, held_out_errors, refine_poses, reprojection, triangulate
 from .params import TrackingParams
 
 #: Pass 1 accepts a match when the next candidate is this many times farther (ratio test).
@@ -28,8 +28,22 @@ BRIM_ITERATIONS = 2
 BUNDLE_ITERATIONS = 1
 #: Frames a point may go on by patch tracking alone, without a blob in any view.
 PATCH_ONLY_FRAMES = 5
+#: Frames a view may go on by patch tracking since its last blob (the patch's template is that blob).
+PATCH_VIEW_FRAMES = PATCH_ONLY_FRAMES
+#: A patch view farther than this (px) from the point its blob views triangulate to is dropped...
+PATCH_AGREE_PX = 1.5
+#: ...and a point with fewer than two blob views loses its patch views when they put it farther
+#: than this (mm) from its neighbours' prediction (a patch over a dot turned away finds skin or
+#: the next dot at a high score, and two close cameras cannot tell the depth).
+PATCH_3D_MM = 2.0
 #: A patch track this close (px) to a blob another point holds on the same frame is rejected.
 PATCH_ON_BLOB_PX = 3.0
+#: Depth error (mm per px of image error) above which a point's views are too close together to
+#: fix its depth (two cameras on one side of the rig, ~10 degrees apart: ~2 mm/px; across: ~0.7).
+NARROW_MM_PER_PX = 1.2
+#: Such a point's depth may lie this far (mm) from its firmly seen neighbours' prediction: farther,
+#: and it is brought back to this distance (grazing or half-hidden dots are detected 1-3 px off).
+NARROW_DEPTH_MM = 1.0
 #: Held-out view errors above this many robust standard deviations of the frame's are mismatches...
 HELD_OUT_SIGMAS = 8.0
 #: ...but never below this (px), so that a frame of perfect data does not reject sub-pixel noise.
@@ -133,9 +147,12 @@ class FrameTracker:
     images : callable, optional
         ``images(sensor, frame) -> (H, W) uint8`` for patch matching; None disables it.
     pool : PatchPool, optional
+    start_frame : int, optional
+        The frame of ``uv0``: its blob samples (``size0`` known) are the first patch templates.
     """
 
-    def __init__(self, rig: RigState, X0, uv0, size0, brim, params: TrackingParams, images=None, pool=None):
+    def __init__(self, rig: RigState, X0, uv0, size0, brim, params: TrackingParams, images=None, pool=None,
+                 start_frame: int | None = None):
         self.rig = rig
         self.p = params
         self.images = images
@@ -150,10 +167,17 @@ class FrameTracker:
         self.prev_frame = None
         self.nb = elastic.neighbours(self.X)
         self.off = np.full(self.nb.shape + (3,), np.nan)
+        self.motion = np.zeros(self.nb.shape + (2,))     # how each neighbour offset has changed
+        self.w = elastic.weights(self.motion)
         meas = np.all(np.isfinite(self.X), axis=1)
         elastic.update_offsets(self.off, self.nb, self.X, meas)
         self.X_last = self.X.copy()
         self.patch_run = np.zeros(self.N, int)           # frames in a row without a blob in any view
+        # Each view's last blob sample (frame, raw px): patches are matched against the marker's
+        # look there, not against the previous frame's patch, so that they cannot drift step by step.
+        blob0 = np.all(np.isfinite(self.size), axis=2) & np.all(np.isfinite(self.uv_prev), axis=2)
+        self.blob_frame = np.where(blob0 & (start_frame is not None), -1 if start_frame is None else start_frame, -1)
+        self.blob_uv = np.where(blob0[..., None], self.uv_prev, np.nan)
         self._img_cache: OrderedDict = OrderedDict()
 
     # ------------------------------------------------------------------ helpers
@@ -243,7 +267,7 @@ class FrameTracker:
         Xp = np.where(np.isfinite(self.V), self.X + self.V, self.X)
         lost = ~tracked
         if np.any(lost):
-            el, _ = elastic.predict(Xp, tracked, self.nb, self.off)
+            el, _ = elastic.predict(Xp, tracked, self.nb, self.off, weight=self.w)
             Xp[lost] = np.where(np.isfinite(el[lost]), el[lost], self.X_last[lost])
         det = np.full((N, S), -1)
         src = np.zeros((N, S), np.uint8)
@@ -286,7 +310,7 @@ class FrameTracker:
         for s in range(S):
             taken[offsets[s] + det[det[:, s] >= 0, s]] = True
         # 4. Pass 2: elastic prediction from the anchors, within the Max Elastic Prediction Distance.
-        el, _ = elastic.predict(Xa, anchor, self.nb, self.off)
+        el, _ = elastic.predict(Xa, anchor, self.nb, self.off, weight=self.w)
         X2 = np.where(anchor[:, None], Xa, np.where(np.isfinite(el), el, Xp))
         use_el = anchor | np.all(np.isfinite(el), axis=1)
         r2 = np.where(use_el, float(p.face_point_max_elastic_prediction_distance),
@@ -343,7 +367,8 @@ class FrameTracker:
             uv_raw[stale] = np.nan
         valid = src != SRC_NONE
         # 6. Triangulate, remove bad 2D projections, refine the cameras (brim fixed), triangulate again.
-        X, err = self._triangulate_clean(rig, uv_c, valid, src, det)
+        X, err = self._triangulate_clean(rig, uv_c, valid, src, det, el)
+        self._check_patches(rig, X, err, uv_c, src)
         valid = src != SRC_NONE
         multi = valid.sum(1) >= 2
         if np.count_nonzero(multi) >= 3:
@@ -355,9 +380,11 @@ class FrameTracker:
             err = reprojection(rig, X, uv_c, valid)
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
+        X, pred, clamped = self._steady_depth(rig, X, valid, measured)
+        err = reprojection(rig, X, uv_c, valid)
         if p.remove_bad_3d_points and np.any(measured):
             back = reacquired | (lost & (valid.sum(1) >= 3))
-            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back)
+            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back, pred)
             valid = src != SRC_NONE
         # 8. Single-sensor tracking of points seen by one sensor only.
         status = np.where(measured, ST_RECONSTRUCTED, ST_NONE).astype(np.uint8)
@@ -387,10 +414,16 @@ class FrameTracker:
         self.V = np.where(have[:, None] & tracked[:, None], X - self.X, np.nan)
         self.X = X.copy()
         self.X_last[have] = X[have]
-        elastic.update_offsets(self.off, self.nb, X, status == ST_RECONSTRUCTED)
+        # A clamped depth is the prediction's, not a measurement: refreshing the offsets with it would
+        # let a biased pair walk the point away by the clamp distance every frame.
+        elastic.update_offsets(self.off, self.nb, X, (status == ST_RECONSTRUCTED) & ~clamped, self.motion)
+        self.w = elastic.weights(self.motion)
         self.uv_prev = uv_raw.copy()
+        blob = src == SRC_DETECTION
+        self.blob_frame[blob] = frame
+        self.blob_uv[blob] = uv_raw[blob]
         for s in range(S):
-            m = src[:, s] == SRC_DETECTION
+            m = blob[:, s]
             self.size[m, s] = fd.size[s][det[m, s]]
         self.rig = rig
         self.prev_frame = frame
@@ -407,7 +440,8 @@ class FrameTracker:
     # --------------------------------------------------------------- sub-steps
     def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det):
         p = self.p
-        rows, sens = np.nonzero(~valid & np.all(np.isfinite(self.uv_prev), axis=2) & np.all(np.isfinite(uv2), axis=2))
+        recent = (self.blob_frame >= 0) & (np.abs(frame - self.blob_frame) <= PATCH_VIEW_FRAMES)
+        rows, sens = np.nonzero(~valid & recent & np.all(np.isfinite(uv2), axis=2))
         if len(rows) == 0:
             return
         jobs, keep = [], []
@@ -416,11 +450,12 @@ class FrameTracker:
             w, h = rig.cameras[s].sensor_size
             if not (np.all(np.isfinite(pred_raw)) and 0 <= pred_raw[0] < w and 0 <= pred_raw[1] < h):
                 continue
-            jobs.append((self._image(s, self.prev_frame), self.uv_prev[i, s], self._image(s, frame), pred_raw,
+            jobs.append((self._image(s, int(self.blob_frame[i, s])), self.blob_uv[i, s], self._image(s, frame), pred_raw,
                          float(r2[i]), int(p.patch_match_size)))
             keep.append((i, s))
         # Another point's blob: every dot looks alike, so a patch that slid onto a dot another point
         # holds this frame (an upper lid closing over the lower lid's marker) is that marker, not this one.
+        # (A merged blob nobody holds is where patches are meant to work: the guide's remedy.)
         held = [fd.raw[s][det[det[:, s] >= 0, s]] for s in range(self.S)]
         for (i, s), (xy, sc) in zip(keep, self.pool.map(patch.track_patch, jobs)):
             if len(held[s]) and np.min(np.hypot(*(held[s] - xy).T)) < PATCH_ON_BLOB_PX:
@@ -465,8 +500,12 @@ class FrameTracker:
             out[i] = True
         return out
 
-    def _triangulate_clean(self, rig, uv_c, valid, src, det):
-        """Triangulate; with Remove Bad 2D Projections drop the worst view above the limit until all fit."""
+    def _triangulate_clean(self, rig, uv_c, valid, src, det, pred):
+        """Triangulate; with Remove Bad 2D Projections drop the worst view above the limit until all fit.
+
+        ``pred`` (N, 3): the neighbours' prediction (NaN none), which decides between views above the
+        held-out limit.
+        """
         X = triangulate(rig, uv_c, valid)
         err = reprojection(rig, X, uv_c, valid)
         if not self.p.remove_bad_2d_projections:
@@ -491,8 +530,16 @@ class FrameTracker:
             held, Xs = held_out_errors(rig, uv_c[rows], valid[rows])
             worst = np.argmax(held, axis=1)
             e = held[np.arange(len(rows)), worst]
+            limit = held_out_limit(e, self.p.max_allowed_2d_projection_error)
+            # Two close cameras left alone fix the depth badly (mm per pixel of a biased detection), so
+            # the good third view can look the worst; of the views above the limit, drop the one whose
+            # removal leaves the point nearest the neighbours' prediction.
+            near = np.linalg.norm(Xs - pred[rows][:, None, :], axis=2)
+            near = np.where((held > limit) & np.isfinite(near), near, np.inf)
+            judged = np.isfinite(near).any(1)
+            worst = np.where(judged, np.argmin(near, axis=1), worst)
             Xo = Xs[np.arange(len(rows)), worst]
-            bad = e > held_out_limit(e, self.p.max_allowed_2d_projection_error)
+            bad = e > limit
             if np.any(bad):
                 b, s = rows[bad], worst[bad]
                 valid[b, s] = False
@@ -502,15 +549,89 @@ class FrameTracker:
                 err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
         return X, err
 
-    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back):
+    def _check_patches(self, rig, X, err, uv_c, src):
+        """Drop patch views that disagree with the point's blob views or, lacking two, its neighbours.
+
+        Patches are the weaker evidence: blob views decide where the point is, and
+        a patch may only add to it.  Updates ``X``, ``err``, ``uv_c`` and ``src`` in place.
+        """
+        patch = src == SRC_PATCH
+        rows = np.flatnonzero(patch.any(1))
+        if len(rows) == 0:
+            return
+        blob = src[rows] == SRC_DETECTION
+        drop = np.zeros((len(rows), self.S), bool)
+        two = blob.sum(1) >= 2
+        if np.any(two):
+            r = rows[two]
+            Xb = triangulate(rig, uv_c[r], blob[two])
+            e = reprojection(rig, Xb, uv_c[r], patch[r])
+            drop[two] = patch[r] & (np.nan_to_num(e, nan=np.inf) > PATCH_AGREE_PX)
+        measured = np.all(np.isfinite(X), axis=1)
+        pred, _ = elastic.predict(X, measured & ~patch.any(1), self.nb, self.off, weight=self.w)
+        few = ~two & measured[rows]
+        if np.any(few):
+            r = rows[few]
+            dev = np.linalg.norm(X[r] - pred[r], axis=1)
+            drop[few] = patch[r] & (np.nan_to_num(dev, nan=0.0) > PATCH_3D_MM)[:, None]
+        if not np.any(drop):
+            return
+        b, s = np.nonzero(drop)
+        b = rows[b]
+        src[b, s] = SRC_NONE
+        uv_c[b, s] = np.nan
+        r = np.unique(b)
+        v = src[r] != SRC_NONE
+        X[r] = triangulate(rig, uv_c[r], v)
+        err[r] = reprojection(rig, X[r], uv_c[r], v)
+
+    def _steady_depth(self, rig, X, valid, measured):
+        """Bound the depth of points seen only by close cameras by their firm neighbours' prediction.
+
+        A narrow pair's depth is off by mm per pixel of detection error, which its
+        residuals do not show; the neighbours seen from both sides place it better.
+        Such a point whose depth lies more than ``NARROW_DEPTH_MM`` from the prediction
+        of its firmly seen neighbours is moved along its viewing direction to that
+        distance (its image positions hardly change).  Points without firm neighbours
+        (a cheek seen from one side only) keep their own depth: predictions from other
+        narrow points would only pass the same error around.
+
+        Returns
+        -------
+        X : ndarray (N, 3)
+        pred : ndarray (N, 3)
+            The neighbours' prediction of every point (from the firm points where
+            they suffice, else from all ``measured``).
+        clamped : ndarray (N,) bool
+            Points whose depth was moved.
+        """
+        u, mm = depth_uncertainty(rig, X, valid & measured[:, None])
+        narrow = measured & (mm > NARROW_MM_PER_PX)
+        pred, _ = elastic.predict(X, measured, self.nb, self.off, weight=self.w)
+        clamped = np.zeros(len(X), bool)
+        if not np.any(narrow):
+            return X, pred, clamped
+        firm_pred, _ = elastic.predict(X, measured & ~narrow, self.nb, self.off, weight=self.w)
+        has_firm = np.all(np.isfinite(firm_pred), axis=1)
+        pred[has_firm] = firm_pred[has_firm]
+        rows = np.flatnonzero(narrow & np.all(np.isfinite(pred), axis=1))
+        if len(rows) == 0:
+            return X, pred, clamped
+        along = np.einsum("ni,ni->n", X[rows] - pred[rows], u[rows])
+        excess = along - np.clip(along, -NARROW_DEPTH_MM, NARROW_DEPTH_MM)
+        X = X.copy()
+        X[rows] -= excess[:, None] * u[rows]
+        clamped[rows] = excess != 0
+        return X, pred, clamped
+
+    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back, pred):
         """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction.
 
         ``back`` rows (lost on the previous frame, now seen by 3+ agreeing cameras) get twice the
         limit: their neighbour offsets date from before they were lost, so the prediction is what
-        is stale, not the point.
+        is stale, not the point.  ``pred`` is the neighbours' prediction of every point.
         """
         lim = np.where(back, 2.0, 1.0) * float(self.p.max_allowed_3d_point_error)
-        pred, _ = elastic.predict(X, measured, self.nb, self.off)
         dev = np.linalg.norm(X - pred, axis=1)
         bad = np.flatnonzero(measured & np.isfinite(dev) & (dev > lim))
         for i in bad.tolist():
@@ -544,7 +665,7 @@ class FrameTracker:
         """Points on the ray of their one sample, at the depth nearest the neighbours' prediction."""
         N = len(X)
         out = np.full((N, 3), np.nan)
-        pred, _ = elastic.predict(X, measured, self.nb, self.off)
+        pred, _ = elastic.predict(X, measured, self.nb, self.off, weight=self.w)
         rows = np.flatnonzero(one & np.all(np.isfinite(pred), axis=1))
         if len(rows) == 0:
             return out

@@ -256,3 +256,43 @@ def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarr
         if np.max(np.abs(d)) < 1e-7:
             break
     return out
+
+
+def depth_uncertainty(rig: RigState, X: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """How poorly a point's views fix its depth: viewing direction and mm of depth per px of error.
+
+    Two cameras on the same side of a rig see a point from directions ~10 degrees
+    apart: a pixel of error along their epipolar line moves the triangulated point
+    by mm along the viewing direction while leaving every residual small.
+
+    Parameters
+    ----------
+    X : ndarray (N, 3)
+        Triangulated points.
+    valid : ndarray (N, S) bool
+        Their views.
+
+    Returns
+    -------
+    u : ndarray (N, 3)
+        Unit mean viewing direction (NaN without views).
+    mm_per_px : ndarray (N,)
+        Depth error along ``u`` per pixel of image error: distance over focal
+        length divided by the sine of the widest angle between two views
+        (inf with fewer than two views).
+    """
+    d = X[:, None, :] - rig.C[None]                                   # (N, S, 3)
+    dist = np.linalg.norm(d, axis=2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.where(valid[..., None], d / dist[..., None], np.nan)
+        cos = np.einsum("nsi,nti->nst", d, d)
+    cos_min = np.nanmin(cos.reshape(len(X), -1), axis=1, initial=1.0)
+    sin = np.sqrt(np.clip(1.0 - cos_min ** 2, 0.0, 1.0))
+    f = rig.K[:, 0, 0]
+    n = valid.sum(1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(valid, dist / f, 0.0).sum(1) / n
+        mm = np.where((n >= 2) & (sin > 1e-9), scale / sin, np.inf)
+        u = np.nansum(d, axis=1)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, mm
