@@ -94,7 +94,7 @@ def add_blob_commands(subparsers) -> None:
     p.add_argument("--start", type=int, help="first frame (default: start of the active range)")
     p.add_argument("--end", type=int, help="last frame, inclusive (default: end of the active range)")
     p.add_argument("--set", action="append", metavar="K=V", help="set a property, e.g. blob.find_white_blobs=true")
-    p.add_argument("--workers", type=int, help="detection processes (default: every core)")
+    p.add_argument("--workers", type=int, help="detection threads (default: every core)")
     p.add_argument("-v", "--verbose", action="store_true", help="progress on stderr")
     p.set_defaults(func=detect_blobs_main)
 

@@ -22,7 +22,9 @@ import numpy as np
 from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from . import features as fe
-from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, extract, measure, window_for
+from .candidate_kernel import greedy_nms
+from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, measure_at, window_for
+from .edges import refine_centres
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
 
@@ -136,15 +138,12 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
         win = window_for(rr[todo])
         ix = np.clip(np.rint(cx[todo]).astype(np.int64), 0, w - 1)
         iy = np.clip(np.rint(cy[todo]).astype(np.int64), 0, h - 1)
-        for hw in np.unique(win).tolist():
-            k = np.flatnonzero(win == hw)
-            sel = todo[k]
-            res = measure(extract(pad, ix[k] + hp, iy[k] + hp, hw), rr[sel], noise, PASSES if rnd == 0 else 2)
-            out[0][sel], out[1][sel] = ix[k] + res[0], iy[k] + res[1]
-            for i in (2, 3, 4):
-                out[i][sel] = res[i]
-            ok[sel] = res[5]
-            extra[sel] = res[6]
+        res = measure_at(pad, ix + hp, iy + hp, win, rr[todo], noise, PASSES if rnd == 0 else 2)
+        out[0][todo], out[1][todo] = ix + res[0], iy + res[1]
+        for i in (2, 3, 4):
+            out[i][todo] = res[i]
+        ok[todo] = res[5]
+        extra[todo] = res[6]
         if rnd == 0:
             # A candidate outside the blob it led to belongs to something else (a neighbour's
             # measurement took it in): it must not win the merge below.
@@ -165,30 +164,15 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     return (*out, ok, extra)
 
 
-def _greedy_nms(pts: np.ndarray, score: np.ndarray, clash) -> np.ndarray:
-    """Indices kept by greedy suppression: the best first, dropping those that clash with a kept one.
+def _greedy_nms(x, y, rad, score, use_max: bool, extra: float) -> np.ndarray:
+    """Indices kept by greedy suppression: the best score first, dropping the points that clash with a kept one.
 
-    ``clash(i, j, d)`` is vectorised over candidate pairs within ``clash.reach`` px.
+    ``i`` and ``j`` clash when closer than ``max(rad_i, rad_j) + extra`` (``use_max``) or
+    ``min(rad_i, rad_j) + extra`` (:func:`.candidate_kernel.greedy_nms`).
     """
-    n = len(pts)
-    if n < 2:
-        return np.arange(n)
-    from scipy.spatial import cKDTree
-
-    pairs = cKDTree(pts).query_pairs(clash.reach, output_type="ndarray")
-    if len(pairs) == 0:
-        return np.arange(n)
-    d = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
-    pairs = pairs[clash(pairs[:, 0], pairs[:, 1], d)]
-    nbr: dict[int, list[int]] = {}
-    for i, j in pairs.tolist():
-        nbr.setdefault(i, []).append(j)
-        nbr.setdefault(j, []).append(i)
-    alive = np.ones(n, bool)
-    for i in np.argsort(-score, kind="stable").tolist():
-        if alive[i]:
-            for j in nbr.get(i, ()):
-                alive[j] = False
+    order = np.argsort(-np.asarray(score), kind="stable")
+    alive = greedy_nms(np.asarray(x, np.float64), np.asarray(y, np.float64), np.asarray(rad, np.float64), order,
+                       use_max, float(extra))
     return np.flatnonzero(alive)
 
 
@@ -198,20 +182,12 @@ def _suppress(x, y, reach, score) -> np.ndarray:
     Two distinct blobs are at least the sum of their radii apart; one blob seen
     on two octaves gives centres much closer than either radius.
     """
-    def clash(i, j, d):
-        return d < np.minimum(reach[i], reach[j]) + 1.0
-    clash.reach = float(reach.max()) + 1.0 if len(reach) else 1.0
-    return _greedy_nms(np.stack([x, y], 1), score, clash)
+    return _greedy_nms(x, y, reach, score, False, 1.0)
 
 
 def _dedupe(x, y, minor, score) -> np.ndarray:
     """Detections kept when one blob was fitted twice: closer than half the larger minor axis (>= 2 px)."""
-    rad = np.maximum(2.0, 0.5 * minor)
-
-    def clash(i, j, d):
-        return d < np.maximum(rad[i], rad[j])
-    clash.reach = float(rad.max()) if len(rad) else 1.0
-    return _greedy_nms(np.stack([x, y], 1), score, clash)
+    return _greedy_nms(x, y, np.maximum(2.0, 0.5 * minor), score, True, 0.0)
 
 
 @dataclass
@@ -303,7 +279,8 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     idx = np.flatnonzero(ok)
     keep = idx[_dedupe(fitted.x[idx], fitted.y[idx], fitted.minor[idx], prob[idx])]
     rec = np.zeros(len(keep), DET_DTYPE)
-    rec["x"], rec["y"] = fitted.x[keep], fitted.y[keep]
+    rec["x"], rec["y"], _ = refine_centres(bright, fitted.x[keep], fitted.y[keep], fitted.major[keep],
+                                           fitted.minor[keep], fitted.angle[keep])
     rec["major"], rec["minor"], rec["angle"] = fitted.major[keep], fitted.minor[keep], fitted.angle[keep]
     rec["score"] = prob[keep]
     rec["color"] = COLOR_WHITE if white else COLOR_BLACK

@@ -16,6 +16,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from . import candidate_kernel as ck
+
 #: DoG sigmas at a pyramid level (pixels of that level): centre and surround.
 SIGMA_C, SIGMA_S = 1.0, 1.8
 #: Half-size of the patch the features are computed on (level pixels).
@@ -35,6 +37,9 @@ _RING_IDX = [np.flatnonzero(m.ravel()) for m in _RINGS]
 _sect = np.floor((np.arctan2(_yy, _xx) + np.pi) / (2 * np.pi) * 8).astype(int) % 8
 _SECTOR_IDX = [np.flatnonzero((_RINGS[3] & (_sect == k)).ravel()) for k in range(8)]
 _INNER_IDX = np.flatnonzero((_dd <= 2.01).ravel())
+# The same, concatenated with their bounds, for the compiled features.
+_RINGS_CAT, _RINGS_PTR = np.concatenate(_RING_IDX), np.cumsum([0] + [len(i) for i in _RING_IDX])
+_SECTORS_CAT, _SECTORS_PTR = np.concatenate(_SECTOR_IDX), np.cumsum([0] + [len(i) for i in _SECTOR_IDX])
 
 
 def level_band(level: int) -> tuple[float, float]:
@@ -56,16 +61,15 @@ def levels_for(min_major: float, max_major: float) -> list[int]:
 
 
 def noise_sigma(img: np.ndarray) -> float:
-    """Robust estimate of the per-pixel noise (grey levels) from horizontal differences.
+    """Robust estimate of the per-pixel noise (grey levels) from horizontal differences (``img`` uint8).
 
-    Uses every 8th row: noise is stationary, and a full-frame median costs ~1 ms.
+    The median absolute difference of neighbours on every 8th row (noise is
+    stationary), over sqrt(2), as a standard deviation (x 1.4826); at least 0.5.
     """
-    rows = img[::8].astype(np.int16)
-    d = np.abs(np.diff(rows, axis=1)).ravel()
-    if d.size == 0:
+    med = ck.median_abs_diff(np.ascontiguousarray(img, np.uint8), 8)
+    if med < 0:
         return 1.0
-    med = float(np.partition(d, d.size // 2)[d.size // 2])
-    return max(0.5, 1.4826 * med / np.sqrt(2.0))
+    return max(0.5, 1.4826 * float(med) / np.sqrt(2.0))
 
 
 def pyramid(bright: np.ndarray, levels: list[int]) -> dict[int, np.ndarray]:
@@ -93,13 +97,8 @@ def candidates(lvl: np.ndarray, floor: float):
     """
     g = cv2.GaussianBlur(lvl, (0, 0), SIGMA_C)
     dog = g - cv2.GaussianBlur(lvl, (0, 0), SIGMA_S)
-    peak = (dog >= cv2.dilate(dog, None)) & (dog > floor)
-    b = PATCH_R + 1
-    peak[:b] = False
-    peak[-b:] = False
-    peak[:, :b] = False
-    peak[:, -b:] = False
-    ys, xs = np.nonzero(peak)
+    # The floor as float32, as the DoG is compared with it.
+    ys, xs = ck.dog_maxima(dog, np.float32(floor), PATCH_R + 1)
     v = dog[ys, xs]
     if len(v) > MAX_CANDIDATES:
         keep = np.argpartition(-v, MAX_CANDIDATES)[:MAX_CANDIDATES]
@@ -132,41 +131,11 @@ def features(lvl: np.ndarray, g: np.ndarray, ys: np.ndarray, xs: np.ndarray, dog
     Hessian eigenvalue ratio (edges and hairs are elongated), contrast-to-noise.
     """
     n = len(ys)
-    if n == 0:
-        return np.zeros((0, len(FEATURE_NAMES)), np.float32)
-    idx = (ys[:, None] + _yy.ravel()[None, :]) * lvl.shape[1] + (xs[:, None] + _xx.ravel()[None, :])
-    P = lvl.ravel()[idx]                                   # (N, 81)
-    rings = np.stack([P[:, i].mean(1) for i in _RING_IDX], 1)
-    centre, outer = rings[:, 0], rings[:, 3]
-    # Level noise: pyrDown averages ~4 pixels per level step.
-    lnoise = noise / (2.0 ** level)
-    contrast = np.maximum(centre - outer, 0.5 * lnoise + 1e-3)
-    sectors = np.stack([P[:, i].mean(1) for i in _SECTOR_IDX], 1)
-    asym = np.abs(P - P[:, ::-1]).mean(1)                  # reversed ravel == 180-degree rotation
-    # Hessian of the centre-blurred image by central differences.
-    W = g.shape[1]
-    gf = g.ravel()
-    c0 = ys * W + xs
-    dxx = gf[c0 + 1] + gf[c0 - 1] - 2 * gf[c0]
-    dyy = gf[c0 + W] + gf[c0 - W] - 2 * gf[c0]
-    dxy = 0.25 * (gf[c0 + W + 1] + gf[c0 - W - 1] - gf[c0 + W - 1] - gf[c0 - W + 1])
-    tr, det = dxx + dyy, dxx * dyy - dxy * dxy
-    disc = np.sqrt(np.maximum(tr * tr / 4 - det, 0))
-    l1, l2 = tr / 2 - disc, tr / 2 + disc                  # l1 most negative for a bright blob
-    ratio = np.where(l1 < 0, l2 / np.minimum(l1, -1e-6), -1.0)
     F = np.empty((n, len(FEATURE_NAMES)), np.float32)
-    F[:, 0] = np.log(contrast / lnoise)
-    F[:, 1:4] = (centre[:, None] - rings[:, 1:4]) / contrast[:, None]
-    F[:, 4] = sectors.std(1) / contrast
-    F[:, 5] = (sectors.max(1) - sectors.min(1)) / contrast
-    F[:, 6] = asym / contrast
-    F[:, 7] = np.clip(ratio, -1, 1)
-    F[:, 8] = dog / contrast
-    F[:, 9] = outer / 255.0
-    F[:, 10] = centre / 255.0
-    F[:, 11] = level / 4.0
-    F[:, 12] = np.log(np.maximum(dog, 1e-3) / lnoise)
-    F[:, 13] = P[:, _INNER_IDX].std(1) / contrast
+    if n:
+        ck.candidate_features(lvl, g, np.asarray(ys, np.int64), np.asarray(xs, np.int64), np.asarray(dog, np.float64),
+                              int(level), float(noise), _RINGS_CAT, _RINGS_PTR, _SECTORS_CAT, _SECTORS_PTR,
+                              _INNER_IDX, PATCH_R, F)
     return F
 
 

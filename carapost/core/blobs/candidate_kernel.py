@@ -1,0 +1,187 @@
+"""Compiled loops of the candidate stage (:mod:`.features`): DoG maxima and per-candidate features.
+
+Steps 1 and 2 of docs/blobs.md, "The algorithm": the local maxima of one
+pyramid level's DoG response, and the 14 features of each candidate's 9x9
+neighbourhood that stage 1 of the classifier sees.  As numpy these were a 3x3
+dilation, three full-level comparisons and a ``nonzero``, then fancy-indexed
+``(N, 81)`` gathers and a dozen reductions per level; here each is one pass.
+Features are computed in float64 and returned as float32 (the numpy version
+summed float32: the two agree to float32 rounding).  Same numba options as
+:mod:`.measure_kernel` (``cache``, ``nogil``).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .measure_kernel import JIT
+
+
+@njit(**JIT)
+def dog_maxima(dog, floor, border):
+    """Pixels of ``dog`` above ``floor`` that are >= their 8 neighbours, ``border`` px or more inside.
+
+    Step 1, the candidate centres: returns ``(ys, xs)`` in row-major order (as
+    ``np.nonzero`` gives them).  Most pixels fail the floor, so the neighbours
+    are compared only for the others.
+    """
+    H, W = dog.shape
+    # Room for every pixel (a flat plateau above the floor is all maxima); untouched pages cost nothing.
+    ys = np.empty(max(H * W, 1), np.int64)
+    xs = np.empty(max(H * W, 1), np.int64)
+    k = 0
+    for i in range(border, H - border):
+        for j in range(border, W - border):
+            v = dog[i, j]
+            if v > floor:
+                if (v >= dog[i - 1, j - 1] and v >= dog[i - 1, j] and v >= dog[i - 1, j + 1] and v >= dog[i, j - 1]
+                        and v >= dog[i, j + 1] and v >= dog[i + 1, j - 1] and v >= dog[i + 1, j]
+                        and v >= dog[i + 1, j + 1]):
+                    ys[k] = i
+                    xs[k] = j
+                    k += 1
+    return ys[:k].copy(), xs[:k].copy()
+
+
+@njit(**JIT)
+def _group_means(P, idx, ptr, out):
+    """Means of ``P`` over the index groups ``idx[ptr[g]:ptr[g + 1]]``."""
+    for g in range(len(ptr) - 1):
+        s = 0.0
+        for q in range(ptr[g], ptr[g + 1]):
+            s += P[idx[q]]
+        out[g] = s / (ptr[g + 1] - ptr[g])
+
+
+@njit(**JIT)
+def candidate_features(lvl, g, ys, xs, dog, level, noise, rings, ring_ptr, sectors, sector_ptr, inner, R, F):
+    """The stage-1 features of candidates ``(ys, xs)`` on one pyramid level (``lvl`` padded by >= R + 1).
+
+    Step 2, stage 1's inputs (:data:`.features.FEATURE_NAMES`, in that order):
+    the ``(2R+1)^2`` patch's (raveled) ring means (ring ``k``'s pixels are
+    ``rings[ring_ptr[k]:ring_ptr[k + 1]]``), its outer ring's 8 sector means
+    (``sectors``, ``sector_ptr`` alike), 180 degree asymmetry, the Hessian of
+    the centre-blurred ``g``, the DoG ``dog``, and the spread of the ``inner``
+    pixels; each normalised by the blob's contrast or the level's noise.
+    Writes ``F`` ``(N, 14)``.
+    """
+    n = 2 * R + 1
+    npx = n * n
+    # Level noise: pyrDown averages ~4 pixels per level step.
+    lnoise = noise / 2.0 ** level
+    rm = np.empty(len(ring_ptr) - 1)
+    sm = np.empty(len(sector_ptr) - 1)
+    ns = len(sm)
+    P = np.empty(npx)
+    for c in range(len(ys)):
+        y, x = ys[c], xs[c]
+        for i in range(n):
+            for j in range(n):
+                P[i * n + j] = lvl[y + i - R, x + j - R]
+        _group_means(P, rings, ring_ptr, rm)
+        _group_means(P, sectors, sector_ptr, sm)
+        centre = rm[0]
+        outer = rm[3]
+        contrast = max(centre - outer, 0.5 * lnoise + 1e-3)
+        # The patch read backwards is the patch turned 180 degrees.
+        asym = 0.0
+        for k in range(npx):
+            asym += abs(P[k] - P[npx - 1 - k])
+        smean = 0.0
+        for s in range(ns):
+            smean += sm[s]
+        smean /= ns
+        svar = 0.0
+        for s in range(ns):
+            svar += (sm[s] - smean) ** 2
+        imean = 0.0
+        for k in inner:
+            imean += P[k]
+        imean /= len(inner)
+        ivar = 0.0
+        for k in inner:
+            ivar += (P[k] - imean) ** 2
+        # Hessian of the centre-blurred level by central differences.
+        g0 = np.float64(g[y, x])
+        dxx = np.float64(g[y, x + 1]) + np.float64(g[y, x - 1]) - 2.0 * g0
+        dyy = np.float64(g[y + 1, x]) + np.float64(g[y - 1, x]) - 2.0 * g0
+        dxy = 0.25 * (np.float64(g[y + 1, x + 1]) + np.float64(g[y - 1, x - 1]) - np.float64(g[y + 1, x - 1])
+                      - np.float64(g[y - 1, x + 1]))
+        tr = dxx + dyy
+        det = dxx * dyy - dxy * dxy
+        disc = math.sqrt(max(tr * tr / 4.0 - det, 0.0))
+        l1 = tr / 2.0 - disc             # the most negative for a bright blob
+        l2 = tr / 2.0 + disc
+        ratio = l2 / min(l1, -1e-6) if l1 < 0.0 else -1.0
+        d = dog[c]
+        F[c, 0] = math.log(contrast / lnoise)
+        for q in range(1, 4):
+            F[c, q] = (centre - rm[q]) / contrast
+        F[c, 4] = math.sqrt(svar / ns) / contrast
+        F[c, 5] = (sm.max() - sm.min()) / contrast
+        F[c, 6] = asym / npx / contrast
+        F[c, 7] = min(max(ratio, -1.0), 1.0)
+        F[c, 8] = d / contrast
+        F[c, 9] = outer / 255.0
+        F[c, 10] = centre / 255.0
+        F[c, 11] = level / 4.0
+        F[c, 12] = math.log(max(d, 1e-3) / lnoise)
+        F[c, 13] = math.sqrt(ivar / len(inner)) / contrast
+
+
+@njit(**JIT)
+def median_abs_diff(img, step):
+    """Median of ``|img[i, j + 1] - img[i, j]|`` over every ``step``-th row of a uint8 image (-1 if none).
+
+    Step 1, the noise estimate: the lower median (the ``size // 2``-th
+    smallest) from a 256-bin histogram.
+    """
+    H, W = img.shape
+    hist = np.zeros(256, np.int64)
+    for i in range(0, H, step):
+        for j in range(W - 1):
+            hist[abs(np.int64(img[i, j + 1]) - np.int64(img[i, j]))] += 1
+    total = hist.sum()
+    if total == 0:
+        return -1
+    k = total // 2
+    acc = 0
+    for v in range(256):
+        acc += hist[v]
+        if acc > k:
+            return v
+    return 255
+
+
+@njit(**JIT)
+def greedy_nms(x, y, rad, order, use_max, extra):
+    """Greedy suppression: in ``order`` (best first), each kept point drops the points that clash with it.
+
+    Steps 2 and 4, merging one blob's candidates on several octaves and one
+    blob's two fits: ``i`` and ``j`` clash when their distance is under
+    ``max(rad_i, rad_j) + extra`` (``use_max``) or ``min(rad_i, rad_j) + extra``.
+    Points are swept in x order, so only those within the largest reach in x
+    are compared.  Returns the kept points' mask.
+    """
+    n = len(x)
+    alive = np.ones(n, np.bool_)
+    if n < 2:
+        return alive
+    reach = rad.max() + extra
+    by_x = np.argsort(x)
+    xs = x[by_x]
+    for i in order:
+        if not alive[i]:
+            continue
+        lo = np.searchsorted(xs, x[i] - reach, side="left")
+        hi = np.searchsorted(xs, x[i] + reach, side="right")
+        for q in range(lo, hi):
+            j = by_x[q]
+            if j == i or not alive[j]:
+                continue
+            lim = (max(rad[i], rad[j]) if use_max else min(rad[i], rad[j])) + extra
+            if math.hypot(x[i] - x[j], y[i] - y[j]) < lim:
+                alive[j] = False
+    return alive

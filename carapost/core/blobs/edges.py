@@ -1,0 +1,327 @@
+"""Step 5 of blob detection: the centre from the dot's painted edge.
+
+The measurement of :mod:`.centre` weighs intensities, so whatever changes the
+light around a dot moves its centre: a lip band or a brow on one side, the
+shading of a curved cheek, the dark half of a nostril, the brim's oblique dots
+whose far side is dimmer.  The paint's *edge*, though, is where the image
+changes fastest, whatever the levels on either side of it: a blurred step's
+steepest point is the step, for any step height.  So each detection's centre
+is measured again here from its outline (docs/blobs.md, step 5):
+
+1. along ``RAYS`` normals of the measured ellipse, the outward fall of the
+   Sobel gradient (bicubic between pixels) is sampled every ``STEP`` px for
+   ``REACH`` px either side; its maximum, refined by a parabola, is an edge point;
+2. rays whose peak is weak (under ``WEAK`` of the blob's median peak: a gap in
+   the edge, a brow hair or a neighbouring feature) are left out;
+3. a conic is fitted to the edge points (least squares), three times, dropping
+   points more than three robust deviations off the last fit; its centre is
+   the edge's centre.
+
+A blob keeps its first centre when the edge does not make a clean ellipse (too
+few rays left, points scattered more than ``MAX_SCATTER`` px about the fit, or a
+centre more than ``MAX_MOVE`` minor semi-axes away: a different shape was found)
+and when the move is within the fit's own noise (``TRUST``).
+
+Each blob is one compiled loop (numba, the options of :mod:`.measure_kernel`):
+the gradients of the few hundred pixels its rays cross, the rays, the fits.
+The numpy version it replaced (full-frame Sobel, ``cv2.remap``, batched
+eigen-decompositions; 6.4 ms a frame) is kept as a test reference,
+``tests/blob_edges_reference.py``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .measure_kernel import JIT
+
+#: Normals sampled around each ellipse.
+RAYS = 48
+#: How far either side of the measured ellipse the edge is looked for, px.
+REACH = 3.0
+#: Sampling step along a normal, px.
+STEP = 0.25
+#: A ray is used when its peak is at least this share of the blob's median peak.
+WEAK = 0.3
+#: Share of the rays that must remain for the edge to be trusted.
+MIN_RAYS = 0.6
+#: Largest robust scatter of the edge points about the fitted conic, px.
+MAX_SCATTER = 0.3
+#: Largest move from the first centre, in minor semi-axes.
+MAX_MOVE = 1.0
+#: A move smaller than this many of the edge fit's own standard errors is noise: the first centre
+#: (from every pixel's intensity, close to the Cramer-Rao bound on a clean dot) is kept; from there
+#: to twice that the centre moves over to the edge's gradually.
+TRUST = 8.0
+#: Robust fitting rounds.
+ROUNDS = 3
+
+_SAMPLES = int(round(2 * REACH / STEP)) + 1
+#: The coarse search's step, in samples.
+COARSE = 4
+_COS = np.cos(2.0 * np.pi * np.arange(RAYS) / RAYS)
+_SIN = np.sin(2.0 * np.pi * np.arange(RAYS) / RAYS)
+
+
+@njit(**JIT)
+def _cubic(t, w):
+    """Bicubic weights of the four taps around fraction ``t`` (OpenCV's INTER_CUBIC, A = -0.75)."""
+    A = -0.75
+    x = t + 1.0
+    w[0] = ((A * x - 5.0 * A) * x + 8.0 * A) * x - 4.0 * A
+    w[1] = ((A + 2.0) * t - (A + 3.0)) * t * t + 1.0
+    u = 1.0 - t
+    w[2] = ((A + 2.0) * u - (A + 3.0)) * u * u + 1.0
+    w[3] = 1.0 - w[0] - w[1] - w[2]
+
+
+@njit(**JIT)
+def _sobel_box(img, x0, y0, nx, ny, gx, gy):
+    """Sobel gradients (/8) of the box ``[x0, x0+nx) x [y0, y0+ny)``, image edges replicated."""
+    H, W = img.shape
+    for j in range(ny):
+        ym = min(max(y0 + j - 1, 0), H - 1)
+        yc = min(max(y0 + j, 0), H - 1)
+        yp = min(max(y0 + j + 1, 0), H - 1)
+        for i in range(nx):
+            xm = min(max(x0 + i - 1, 0), W - 1)
+            xc = min(max(x0 + i, 0), W - 1)
+            xp = min(max(x0 + i + 1, 0), W - 1)
+            a, b, c = float(img[ym, xm]), float(img[ym, xc]), float(img[ym, xp])
+            d, f = float(img[yc, xm]), float(img[yc, xp])
+            g, h, k = float(img[yp, xm]), float(img[yp, xc]), float(img[yp, xp])
+            gx[j, i] = ((c + 2.0 * f + k) - (a + 2.0 * d + g)) * 0.125
+            gy[j, i] = ((g + 2.0 * h + k) - (a + 2.0 * b + c)) * 0.125
+
+
+@njit(**JIT)
+def _sample(gx, gy, x0, y0, px, py, wx, wy):
+    """Bicubic gradient at image point ``(px, py)`` from the box gradients (the image's edge replicated)."""
+    ix, iy = math.floor(px), math.floor(py)
+    _cubic(px - ix, wx)
+    _cubic(py - iy, wy)
+    # The box reaches 2 px beyond every sample (see _edge_points): no tap needs clamping.
+    c0, r0 = int(ix) - 1 - x0, int(iy) - 1 - y0
+    sx = sy = 0.0
+    for j in range(4):
+        ax = ay = 0.0
+        for i in range(4):
+            ax += wx[i] * gx[r0 + j, c0 + i]
+            ay += wx[i] * gy[r0 + j, c0 + i]
+        sx += wy[j] * ax
+        sy += wy[j] * ay
+    return sx, sy
+
+
+@njit(**JIT)
+def _bilinear(gx, gy, x0, y0, px, py):
+    """Bilinear gradient at image point ``(px, py)`` from the box gradients (for the coarse search)."""
+    ny, nx = gx.shape
+    ix, iy = math.floor(px), math.floor(py)
+    fx, fy = px - ix, py - iy
+    c0, r0 = min(max(ix - x0, 0), nx - 1), min(max(iy - y0, 0), ny - 1)
+    c1, r1 = min(c0 + 1, nx - 1), min(r0 + 1, ny - 1)
+    w00, w01, w10, w11 = (1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy
+    return (w00 * gx[r0, c0] + w01 * gx[r0, c1] + w10 * gx[r1, c0] + w11 * gx[r1, c1],
+            w00 * gy[r0, c0] + w01 * gy[r0, c1] + w10 * gy[r1, c0] + w11 * gy[r1, c1])
+
+
+@njit(**JIT)
+def _fall(gx, gy, x0, y0, px, py, nx, ny, t, wx, wy):
+    """The outward fall of intensity at ``t`` along the normal ``(nx, ny)`` from ``(px, py)`` (bicubic)."""
+    sx, sy = _sample(gx, gy, x0, y0, px + nx * t, py + ny * t, wx, wy)
+    return -(sx * nx + sy * ny)
+
+
+@njit(**JIT)
+def _edge_points(img, cx, cy, a, b, th, ex, ey, peak):
+    """One blob's edge point and peak fall on each ray (step 5.1)."""
+    # Samples lie within max(a, b) + REACH of the centre (the normals leave the ellipse at most that far);
+    # the bicubic taps reach 2 px beyond.
+    reach = max(a, b) + REACH + 3.0
+    x0, y0 = int(math.floor(cx - reach)), int(math.floor(cy - reach))
+    n = int(math.ceil(2.0 * reach)) + 2
+    gx = np.empty((n, n))
+    gy = np.empty((n, n))
+    _sobel_box(img, x0, y0, n, n, gx, gy)
+    wx = np.empty(4)
+    wy = np.empty(4)
+    fall = np.empty(_SAMPLES)
+    ca, sa = math.cos(th), math.sin(th)
+    for k in range(RAYS):
+        c, s = _COS[k], _SIN[k]
+        ux, uy = a * c, b * s
+        px, py = cx + ca * ux - sa * uy, cy + sa * ux + ca * uy
+        # The ellipse's outward normal at parameter phi is (b cos phi, a sin phi) in its own axes.
+        m0, m1 = b * c, a * s
+        norm = math.hypot(m0, m1)
+        m0, m1 = m0 / norm, m1 / norm
+        nx, ny = ca * m0 - sa * m1, sa * m0 + ca * m1
+        # Coarse search, bilinear every COARSE steps; then bicubic at the peak and its neighbours (the
+        # parabola's three points), moving along while the peak is not in the middle.
+        best, top = 0, -np.inf
+        for q in range(0, _SAMPLES, COARSE):
+            t = -REACH + q * STEP
+            sx, sy = _bilinear(gx, gy, x0, y0, px + nx * t, py + ny * t)
+            f = -(sx * nx + sy * ny)
+            if f > top:
+                best, top = q, f
+        best = min(max(best, 1), _SAMPLES - 2)
+        for q in range(best - 1, best + 2):
+            fall[q] = _fall(gx, gy, x0, y0, px, py, nx, ny, -REACH + q * STEP, wx, wy)
+        for _ in range(COARSE):
+            if fall[best - 1] > fall[best] and best > 1:
+                best -= 1
+                fall[best - 1] = _fall(gx, gy, x0, y0, px, py, nx, ny, -REACH + (best - 1) * STEP, wx, wy)
+            elif fall[best + 1] > fall[best] and best < _SAMPLES - 2:
+                best += 1
+                fall[best + 1] = _fall(gx, gy, x0, y0, px, py, nx, ny, -REACH + (best + 1) * STEP, wx, wy)
+            else:
+                break
+        g0, g1, g2 = fall[best - 1], fall[best], fall[best + 1]
+        curv = g0 - 2.0 * g1 + g2
+        off = 0.5 * (g0 - g2) / curv if curv < 0 else 0.0
+        t = -REACH + best * STEP + min(max(off, -1.0), 1.0) * STEP
+        ex[k], ey[k], peak[k] = px + nx * t, py + ny * t, g1
+
+
+@njit(**JIT)
+def _smallest_eigenvector(S):
+    """Unit eigenvector of the smallest eigenvalue of the 6x6 scatter matrix ``S`` (inverse iteration).
+
+    A conic through points on an ellipse makes that eigenvalue (the residual sum
+    of squares) far below the next, so a few steps from a circle converge; a
+    shift of 1e-12 of the trace keeps the Cholesky factor defined when the points
+    fit exactly.  (LAPACK's eigh, three per blob, cost more than everything else.)
+    """
+    L = S.copy()
+    eps = 1e-12 * (S[0, 0] + S[1, 1] + S[2, 2] + S[3, 3] + S[4, 4] + S[5, 5]) + 1e-300
+    for j in range(6):
+        d = L[j, j] + eps
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        d = math.sqrt(max(d, 1e-300))
+        L[j, j] = d
+        for i in range(j + 1, 6):
+            t = L[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / d
+    z = np.array([1.0, 0.0, 1.0, 0.0, 0.0, -1.0])
+    y = np.empty(6)
+    for _ in range(6):
+        for i in range(6):                      # L y = z
+            t = z[i]
+            for k in range(i):
+                t -= L[i, k] * y[k]
+            y[i] = t / L[i, i]
+        for i in range(5, -1, -1):              # L^T z = y
+            t = y[i]
+            for k in range(i + 1, 6):
+                t -= L[k, i] * z[k]
+            z[i] = t / L[i, i]
+        norm = math.sqrt((z * z).sum())
+        z /= norm
+    return z
+
+
+@njit(**JIT)
+def _conic_fit(u, v, w, scale, res):
+    """Weighted algebraic conic fit of points ``(u, v)`` (scaled); centre and geometric residuals (px).
+
+    Returns ``(x0, y0, ok)`` in the scaled units; fills ``res``.
+    """
+    S = np.zeros((6, 6))
+    m = np.empty(6)
+    for k in range(len(u)):
+        if w[k] == 0.0:
+            continue
+        m[0], m[1], m[2], m[3], m[4], m[5] = u[k] * u[k], u[k] * v[k], v[k] * v[k], u[k], v[k], 1.0
+        for i in range(6):
+            for j in range(6):
+                S[i, j] += m[i] * m[j]
+    z = _smallest_eigenvector(S)
+    A, B, C, D, E, F = z[0], z[1], z[2], z[3], z[4], z[5]
+    det = 4.0 * A * C - B * B
+    safe = det if abs(det) > 1e-12 else 1.0
+    x0, y0 = (B * E - 2.0 * C * D) / safe, (B * D - 2.0 * A * E) / safe
+    for k in range(len(u)):
+        alg = A * u[k] * u[k] + B * u[k] * v[k] + C * v[k] * v[k] + D * u[k] + E * v[k] + F
+        gu = 2.0 * A * u[k] + B * v[k] + D
+        gv = B * u[k] + 2.0 * C * v[k] + E
+        res[k] = abs(alg) / max(math.hypot(gu, gv), 1e-12) * scale
+    return x0, y0, det > 0
+
+
+@njit(**JIT)
+def _median_of_used(r, used):
+    """The (lower) median of ``r`` where ``used``; infinity when none is."""
+    vals = np.sort(r[used])
+    if len(vals) == 0:
+        return np.inf
+    return vals[(len(vals) - 1) // 2]
+
+
+@njit(**JIT)
+def _refine(img, x, y, major, minor, angle, ox, oy, share):
+    ex, ey, peak = np.empty(RAYS), np.empty(RAYS), np.empty(RAYS)
+    u, v, res = np.empty(RAYS), np.empty(RAYS), np.empty(RAYS)
+    w = np.empty(RAYS)
+    good = np.empty(RAYS, np.bool_)
+    for i in range(len(x)):
+        a, b = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5)
+        ox[i], oy[i], share[i] = x[i], y[i], 0.0
+        _edge_points(img, x[i], y[i], a, b, math.radians(angle[i]), ex, ey, peak)
+        lim = WEAK * np.median(peak)
+        for k in range(RAYS):
+            good[k] = peak[k] > lim and peak[k] > 0.0
+            w[k] = 1.0 if good[k] else 0.0
+            u[k], v[k] = (ex[k] - x[i]) / a, (ey[k] - y[i]) / a
+        x0 = y0 = 0.0
+        ok = False
+        spread = np.inf
+        for _ in range(ROUNDS):
+            x0, y0, ok = _conic_fit(u, v, w, a, res)
+            spread = 1.4826 * _median_of_used(res, w > 0.0) + 0.02
+            for k in range(RAYS):
+                w[k] = 1.0 if good[k] and res[k] < 3.0 * spread else 0.0
+        n = w.sum()
+        shift = math.hypot(x0, y0) * a
+        if not (ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and shift < MAX_MOVE * b):
+            continue
+        # The edge points' scatter over the square root of their number: the standard error of the fit's
+        # centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
+        noise = TRUST * spread / math.sqrt(max(n, 1.0))
+        s = min(max((shift - noise) / max(noise, 1e-9), 0.0), 1.0)
+        ox[i] += x0 * a * s
+        oy[i] += y0 * a * s
+        share[i] = s
+
+
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle):
+    """Centres of blobs measured again from their edges.
+
+    Parameters
+    ----------
+    bright : numpy.ndarray
+        Grey ``uint8`` image with the blobs brighter than their surround (the
+        inverted image for black blobs).
+    x, y, major, minor, angle : array_like
+        The measured ellipses (centre; full axes, px; angle of the major axis,
+        degrees).
+
+    Returns
+    -------
+    x, y : numpy.ndarray
+        New centres (the old ones where the edge is not a clean ellipse).
+    used : numpy.ndarray of bool
+        Which blobs moved towards the edge's centre.
+    """
+    args = [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in (x, y, major, minor, angle)]
+    n = len(args[0])
+    ox, oy, share = np.empty(n), np.empty(n), np.empty(n)
+    if n:
+        _refine(np.ascontiguousarray(bright), *args, ox, oy, share)
+    return ox, oy, share > 0

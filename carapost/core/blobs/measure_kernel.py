@@ -1,0 +1,387 @@
+"""Compiled per-blob loops of the centre and ellipse measurement (:mod:`.centre`).
+
+The measurement is many small windows (11-57 px square, ~450 per frame over the
+three rounds): as numpy reductions over ``(N, window)`` arrays, the per-call
+overhead of ~100 operations per window size dominated (~36 ms of a 47 ms
+frame).  Here every blob is a few plain loops over its window, compiled by numba:
+
+- ``cache=True``: the machine code is kept on disk beside this module, so the
+  worker processes of Detect Blobs [Active Range] load it instead of compiling;
+- ``nogil=True``: a thread running a kernel lets the others run;
+- ``fastmath={"reassoc"}`` and branch-free loop bodies: sums may be reordered so
+  that they are vectorised (4 lanes); nothing else of IEEE arithmetic is relaxed
+  (no approximate division, no assumption that values are finite).
+
+Everything is float64 (the numpy version was float32): its results are the
+float64 numpy arithmetic's to ~1e-11 px (``tests/test_blob_measure_kernel.py``).
+Windows are flat arrays with their pixels' coordinates beside them: one long
+loop per step vectorises, where loops over each row's few pixels inside a
+weight's reach ran mostly in their scalar remainders (measured: full rows were
+faster than the spans inside the reach).  The step names below are those of
+docs/blobs.md, "The algorithm", step 3.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: Options of every kernel (see the module's docstring).
+JIT = dict(cache=True, nogil=True, fastmath={"reassoc"})
+
+
+@njit(**JIT)
+def taper(d2, reach, inv):
+    """Weight at squared distance ``d2``: 1 up to ``reach - 1/inv``, falling linearly to 0 at ``reach``.
+
+    Step 3, the taper of the weights beyond the blob's radius (of the lines, the
+    centroid and the moments): ``reach = r + TAPER_OUT``, ``inv = 1 / (TAPER_OUT - TAPER_IN)``.
+    """
+    return min(max((reach - math.sqrt(d2)) * inv, 0.0), 1.0)
+
+
+@njit(**JIT)
+def rows(c, reach, off, size):
+    """Rows ``[lo, hi)`` of a grid (row ``i`` at ``i - off``) within ``reach`` of ``c``, one row of slack each side.
+
+    The loops below visit only these rows (the weights decide exactly which
+    pixels count): a contiguous part of the flat window, still one long loop.
+    """
+    return max(int(math.floor(c - reach + off)) - 1, 0), min(int(math.ceil(c + reach + off)) + 2, size)
+
+
+@njit(**JIT)
+def window_gradients(P, n, tmp, gx, gy, sums):
+    """Gradients on the half-pixel grid of the flat ``n x n`` window ``P``, each the 3x3 mean of its neighbours.
+
+    Step 3, the radial-symmetry centre's lines: 2x2 differences (symmetric about
+    each half-pixel point), then a 3x3 mean with the edge rows and columns
+    replicated, which steadies each line's direction.  Fills the flat ``(n-1)^2``
+    ``gx``, ``gy`` (``tmp`` is ``(4, >= (n-1)^2)`` scratch) and ``sums = (sum gx,
+    sum gy, sum gx^2, sum gy^2)``: the window's gradient energy for any background
+    slope follows from them.
+    """
+    m = n - 1
+    rx, ry, vx, vy = tmp[0], tmp[1], tmp[2], tmp[3]
+    for i in range(m):
+        for j in range(m):
+            s = P[(i + 1) * n + j + 1] - P[i * n + j]
+            t = P[(i + 1) * n + j] - P[i * n + j + 1]
+            rx[i * m + j] = 0.5 * (s - t)
+            ry[i * m + j] = 0.5 * (s + t)
+    # The 3x3 sum: sums of three rows, then of three columns.
+    for i in range(m):
+        u = max(i - 1, 0) * m
+        c = i * m
+        d = min(i + 1, m - 1) * m
+        for j in range(m):
+            vx[c + j] = rx[u + j] + rx[c + j] + rx[d + j]
+            vy[c + j] = ry[u + j] + ry[c + j] + ry[d + j]
+    ninth = 1.0 / 9.0
+    for i in range(m):
+        c = i * m
+        gx[c] = (vx[c] + vx[c] + vx[c + 1]) * ninth
+        gy[c] = (vy[c] + vy[c] + vy[c + 1]) * ninth
+        for j in range(1, m - 1):
+            gx[c + j] = (vx[c + j - 1] + vx[c + j] + vx[c + j + 1]) * ninth
+            gy[c + j] = (vy[c + j - 1] + vy[c + j] + vy[c + j + 1]) * ninth
+        gx[c + m - 1] = (vx[c + m - 2] + vx[c + m - 1] + vx[c + m - 1]) * ninth
+        gy[c + m - 1] = (vy[c + m - 2] + vy[c + m - 1] + vy[c + m - 1]) * ninth
+    sx = sy = sxx = syy = 0.0
+    for k in range(m * m):
+        sx += gx[k]
+        sy += gy[k]
+        sxx += gx[k] * gx[k]
+        syy += gy[k] * gy[k]
+    sums[0], sums[1], sums[2], sums[3] = sx, sy, sxx, syy
+
+
+@njit(**JIT)
+def ring_plane(P, X, Y, h, cx, cy, r, noise, ring_in, ring_out, slope_k, plane):
+    """Background plane ``b + gx x + gy y`` fitted to the ring ``r + ring_in .. r + ring_out`` about (cx, cy).
+
+    Step 3, the local background: least squares over the ring's pixels (plus
+    1e-3 on the normal equations' diagonal, so an empty ring gives a zero
+    plane), then the slope is shrunk by ``slope_k`` times the slope noise alone
+    would give.  Writes ``plane[0:3]``; returns the ring's pixel count.
+    """
+    lo = (r + ring_in) * (r + ring_in)
+    hi = (r + ring_out) * (r + ring_out)
+    s0 = sx = sy = sxx = sxy = syy = 0.0
+    rb = rx = ry = sd2 = 0.0
+    n = 2 * h + 1
+    i0, i1 = rows(cy, r + ring_out, h, n)
+    # Views of the rows (a loop starting past 0 was not vectorised: 3x slower).
+    P, X, Y = P[i0 * n:i1 * n], X[i0 * n:i1 * n], Y[i0 * n:i1 * n]
+    for k in range(len(X)):
+        x = X[k]
+        y = Y[k]
+        dx = x - cx
+        dy = y - cy
+        d2 = dx * dx + dy * dy
+        f = 1.0 if (d2 >= lo) & (d2 <= hi) else 0.0
+        v = f * P[k]
+        s0 += f
+        sx += f * x
+        sy += f * y
+        sxx += f * (x * x)
+        sxy += f * (x * y)
+        syy += f * (y * y)
+        rb += v
+        rx += v * x
+        ry += v * y
+        sd2 += f * d2
+    a00, a11, a22 = s0 + 1e-3, sxx + 1e-3, syy + 1e-3
+    # Cramer's rule on the symmetric 3x3 normal equations.
+    c00 = a11 * a22 - sxy * sxy
+    c01 = sxy * sy - sx * a22
+    c02 = sx * sxy - a11 * sy
+    det = a00 * c00 + sx * c01 + sy * c02
+    c11 = a00 * a22 - sy * sy
+    c12 = sx * sy - a00 * sxy
+    c22 = a00 * a11 - sx * sx
+    b = (c00 * rb + c01 * rx + c02 * ry) / det
+    gx = (c01 * rb + c11 * rx + c12 * ry) / det
+    gy = (c02 * rb + c12 * rx + c22 * ry) / det
+    sl = math.sqrt(gx * gx + gy * gy)
+    sl_noise = noise / math.sqrt(max(sd2 / 2.0, 1e-6))
+    k = max(sl - slope_k * sl_noise, 0.0) / max(sl, 1e-9)
+    plane[0] = b
+    plane[1] = gx * k
+    plane[2] = gy * k
+    return s0
+
+
+@njit(**JIT)
+def lines_centre(gx0, gy0, GX, GY, h, plane, cx, cy, reach, inv, noise, lim, sol):
+    """One radial-symmetry solve about (cx, cy): the point nearest the gradient lines.
+
+    Step 3, the radial-symmetry centre: the line through each half-pixel point
+    (``GX``, ``GY``) along its gradient (less the plane's slope), weight =
+    taper x (squared gradient less the noise's); minimise the weighted squared
+    distances.  A degenerate system keeps the old centre; the answer is clipped
+    to ``lim``.  Writes ``sol = (x, y)``.
+    """
+    nz = noise * noise
+    b1 = plane[1]
+    b2 = plane[2]
+    sxx = syy = sxy = bx = by = 0.0
+    m = 2 * h
+    i0, i1 = rows(cy, reach, h - 0.5, m)
+    gx0, gy0, GX, GY = gx0[i0 * m:i1 * m], gy0[i0 * m:i1 * m], GX[i0 * m:i1 * m], GY[i0 * m:i1 * m]
+    for k in range(len(GX)):
+        px = GX[k]
+        py = GY[k]
+        dx = px - cx
+        dy = py - cy
+        gx = gx0[k] - b1
+        gy = gy0[k] - b2
+        w = taper(dx * dx + dy * dy, reach, inv) * max(gx * gx + gy * gy - nz, 0.0)
+        wgx = w * gx
+        wgy = w * gy
+        sxx += wgy * gy
+        syy += wgx * gx
+        sxy -= wgx * gy
+        npx = gx * py - gy * px
+        bx -= wgy * npx
+        by += wgx * npx
+    det = sxx * syy - sxy * sxy
+    if det > 1e-12 * (sxx + syy) ** 2 + 1e-20:
+        cx = (syy * bx - sxy * by) / det
+        cy = (sxx * by - sxy * bx) / det
+    sol[0] = min(max(cx, -lim), lim)
+    sol[1] = min(max(cy, -lim), lim)
+
+
+@njit(**JIT)
+def inside_moments(D, X, Y, h, a, cx, cy, reach, inv, mom):
+    """Tapered moments of the half-contrast inside map ``clip(2 d / a - 0.5, 0, 1)`` about (cx, cy).
+
+    Step 3, the inside map's centroid and the ellipse's second moments (``D``:
+    the background-subtracted window): writes ``mom = (m0, mx, my, mxx, myy,
+    mxy)``, sums of the tapered map times 1, dx, dy, dx^2, dy^2, dx dy, with
+    dx, dy from (cx, cy).
+    """
+    s = 2.0 / a
+    m0 = mx = my = mxx = myy = mxy = 0.0
+    n = 2 * h + 1
+    i0, i1 = rows(cy, reach, h, n)
+    D, X, Y = D[i0 * n:i1 * n], X[i0 * n:i1 * n], Y[i0 * n:i1 * n]
+    for k in range(len(X)):
+        dx = X[k] - cx
+        dy = Y[k] - cy
+        v = min(max(D[k] * s - 0.5, 0.0), 1.0) * taper(dx * dx + dy * dy, reach, inv)
+        m0 += v
+        mx += v * dx
+        my += v * dy
+        mxx += v * dx * dx
+        myy += v * dy * dy
+        mxy += v * dx * dy
+    mom[0], mom[1], mom[2], mom[3], mom[4], mom[5] = m0, mx, my, mxx, myy, mxy
+
+
+@njit(**JIT)
+def measure_one(h, r, noise, passes, c, S, out, extra):
+    """Centre, ellipse and the stage-2 measurements of one blob.
+
+    Step 3 end to end (see :func:`carapost.core.blobs.centre.measure`, whose
+    outputs these are): ``passes`` plane + lines solves, each about the last
+    answer; the contrast; the 0.3 lines + 0.7 inside-map centroid blend; the
+    moments about the blend -> ellipse; then the edge and core measurements.
+    ``c`` holds the constants ``(TAPER_IN, TAPER_OUT, RING_IN, RING_OUT,
+    SLOPE_K, MIX, CORE_Q)``.  ``S`` is ``(13, >= (2h+1)^2)`` scratch whose rows
+    0-2 hold the flat window and its pixels' x and y (row-major, relative to
+    its centre pixel) and rows 6-7 the half-pixel grid's x and y.  Writes ``out = (x, y, major, minor, angle, ok)`` and
+    ``extra`` (the order of ``MEASURE_NAMES``).
+    """
+    t_in, t_out, ring_in, ring_out, slope_k, mix, core_q = c[0], c[1], c[2], c[3], c[4], c[5], c[6]
+    inv = 1.0 / (t_out - t_in)
+    reach = r + t_out
+    n = 2 * h + 1
+    npx = n * n
+    m = n - 1
+    mpx = m * m
+    P, X, Y, D, gx0, gy0, GX, GY, small = S[0], S[1], S[2], S[3], S[4], S[5], S[6], S[7], S[12]
+    plane = small[0:3]
+    sol = small[3:5]
+    mom = small[5:11]
+    gsum = small[11:15]
+    window_gradients(P, n, S[8:12], gx0, gy0, gsum)
+    plane[:] = 0.0
+    sol[:] = 0.0
+    px = py = 0.0           # the centre the last solve's weights (and ring) were about
+    lim = float(h - 1)
+    ring_n = 0.0
+    for _ in range(max(1, passes)):
+        px, py = sol[0], sol[1]
+        ring_n = ring_plane(P, X, Y, h, px, py, r, noise, ring_in, ring_out, slope_k, plane)
+        lines_centre(gx0, gy0, GX, GY, h, plane, px, py, reach, inv, noise, lim, sol)
+    lx, ly = sol[0], sol[1]   # the lines' centre
+    b0, b1, b2 = plane[0], plane[1], plane[2]
+    # The background-subtracted window, and the residual of the background in the last ring.
+    lo = (r + ring_in) * (r + ring_in)
+    hi = (r + ring_out) * (r + ring_out)
+    rd2 = 0.0
+    for k in range(npx):
+        d = P[k] - b0 - b1 * X[k] - b2 * Y[k]
+        D[k] = d
+        dx = X[k] - px
+        dy = Y[k] - py
+        d2 = dx * dx + dy * dy
+        rd2 += d * d if (d2 >= lo) & (d2 <= hi) else 0.0
+    border_std = math.sqrt(rd2 / max(ring_n, 1.0))
+    # Contrast: the background-subtracted maximum of the centre 3x3.
+    a_n = -np.inf
+    for i in range(h - 1, h + 2):
+        for j in range(h - 1, h + 2):
+            a_n = max(a_n, D[i * n + j])
+    a = max(a_n, 0.5 * noise + 1e-3)
+    # The inside map's centroid about the lines' centre, then the blend.
+    inside_moments(D, X, Y, h, a, lx, ly, reach, inv, mom)
+    m0 = max(mom[0], 1e-6)
+    cx = lx + (1.0 - mix) * mom[1] / m0
+    cy = ly + (1.0 - mix) * mom[2] / m0
+    inside_moments(D, X, Y, h, a, cx, cy, reach, inv, mom)
+    m0 = max(mom[0], 1e-6)
+    mxx, myy, mxy = mom[3] / m0, mom[4] / m0, mom[5] / m0
+    tr = mxx + myy
+    det = mxx * myy - mxy * mxy
+    disc = math.sqrt(max(tr * tr / 4.0 - det, 0.0))
+    # A uniform ellipse of semi-axes (A, B) has second moments A^2/4, B^2/4: full axes 4 sqrt(l).
+    major = 4.0 * math.sqrt(max(tr / 2.0 + disc, 1e-6))
+    minor = 4.0 * math.sqrt(max(tr / 2.0 - disc, 1e-6))
+    angle = 0.5 * math.degrees(math.atan2(2.0 * mxy, mxx - myy))
+    angle = (angle + 90.0) % 180.0 - 90.0
+    fill = m0 / max(math.pi * major * minor / 4.0, 1e-6)
+    # The core: q < core_q inside the moment ellipse (q = 1 on a uniform ellipse's edge).  Its
+    # rows lie within sqrt(4 core_q myy) of the centre (more when the determinant was floored).
+    mdet = max(det, 1e-6)
+    ry = math.sqrt(4.0 * core_q * max(myy, 0.0) * mdet / det) if det > 0.0 else float(n)
+    i0, i1 = rows(cy, ry, h, n)
+    Dc, Xc, Yc = D[i0 * n:i1 * n], X[i0 * n:i1 * n], Y[i0 * n:i1 * n]
+    nc = cs = cs2 = 0.0
+    for k in range(len(Xc)):
+        dx = Xc[k] - cx
+        dy = Yc[k] - cy
+        f = 1.0 if (myy * dx * dx - 2.0 * mxy * dx * dy + mxx * dy * dy) / (4.0 * mdet) < core_q else 0.0
+        nc += f
+        cs += f * Dc[k]
+        cs2 += f * (Dc[k] * Dc[k])
+    nc = max(nc, 1.0)
+    cmean = cs / nc
+    core_std = math.sqrt(max(cs2 / nc - cmean * cmean, 0.0)) / a
+    # How well the last solve's lines (weights about the centre they were solved about) meet
+    # the lines' centre; the edge's sharpness and its share of the window's gradient energy
+    # (weights about the answer).
+    nz = noise * noise
+    wd2 = wg2_last = wg2 = wg = 0.0
+    i0, i1 = rows(py, reach, h - 0.5, m)
+    j0, j1 = rows(cy, reach, h - 0.5, m)
+    k0, k1 = min(i0, j0) * m, max(i1, j1) * m
+    gxv, gyv, GXv, GYv = gx0[k0:k1], gy0[k0:k1], GX[k0:k1], GY[k0:k1]
+    for k in range(len(GXv)):
+        gxx = GXv[k]
+        gyy = GYv[k]
+        gx = gxv[k] - b1
+        gy = gyv[k] - b2
+        g2 = gx * gx + gy * gy
+        w = taper((gxx - px) ** 2 + (gyy - py) ** 2, reach, inv) * max(g2 - nz, 0.0)
+        dist = gx * (ly - gyy) - gy * (lx - gxx)
+        wd2 += w * dist * dist
+        wg2_last += w * g2
+        wt = taper((gxx - cx) ** 2 + (gyy - cy) ** 2, reach, inv)
+        wg2 += wt * g2
+        wg += wt * math.sqrt(g2)
+    # sum (g - b)^2 over the window, expanded: the plane's slope is one number per blob.
+    g2_all = gsum[2] + gsum[3] - 2.0 * (b1 * gsum[0] + b2 * gsum[1]) + mpx * (b1 * b1 + b2 * b2)
+    line_rms = math.sqrt(wd2 / max(wg2_last, 1e-9))
+    sharp = wg2 / max(wg, 1e-6) / a
+    edge_share = wg2 / max(g2_all, 1e-6)
+    out[0], out[1], out[2], out[3], out[4] = cx, cy, major, minor, angle
+    ok = (math.isfinite(cx) and math.isfinite(cy) and abs(cx) < h - 1.5 and abs(cy) < h - 1.5
+          and a_n > 0.5 * noise)
+    out[5] = 1.0 if ok else 0.0
+    extra[0] = a
+    extra[1] = line_rms
+    extra[2] = sharp
+    extra[3] = border_std
+    extra[4] = math.sqrt(b1 * b1 + b2 * b2) * r / a
+    extra[5] = fill
+    extra[6] = edge_share
+    extra[7] = b0 + b1 * cx + b2 * cy
+    extra[8] = core_std
+
+
+@njit(**JIT)
+def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
+    """Measure blobs in windows of ``img`` centred on pixels ``(ix, iy)``, half-sizes ``hs``.
+
+    Step 3 for every blob of a frame (one call per round): copies each window
+    (``img`` must be padded by the largest half-size) and runs
+    :func:`measure_one`.  ``out`` is ``(N, 6)``, ``extra`` ``(N, 9)``.
+    """
+    hmax = 1
+    for k in range(len(hs)):
+        hmax = max(hmax, hs[k])
+    S = np.empty((13, (2 * hmax + 1) ** 2))
+    P, X, Y, GX, GY = S[0], S[1], S[2], S[6], S[7]
+    h_grid = -1
+    # By window size, so that the pixels' coordinates are laid out once per size.
+    for k in np.argsort(hs, kind="mergesort"):
+        h = hs[k]
+        n = 2 * h + 1
+        if h != h_grid:
+            h_grid = h
+            for i in range(n):
+                for j in range(n):
+                    X[i * n + j] = j - h
+                    Y[i * n + j] = i - h
+            for i in range(n - 1):
+                for j in range(n - 1):
+                    GX[i * (n - 1) + j] = j - h + 0.5
+                    GY[i * (n - 1) + j] = i - h + 0.5
+        for i in range(n):
+            for j in range(n):
+                P[i * n + j] = img[iy[k] - h + i, ix[k] - h + j]
+        measure_one(h, max(float(r0[k]), 1.0), noise, passes, c, S, out[k], extra[k])

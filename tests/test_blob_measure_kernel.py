@@ -1,0 +1,191 @@
+"""The compiled blob-detection kernels compute what the numpy implementations they replaced computed.
+
+References (test-only): ``tests/blob_measure_reference.py`` (the centre and ellipse
+measurement, vectorised numpy, float32 as shipped or float64) and
+``tests/blob_features_reference.py`` (noise estimate, DoG maxima, stage-1 features,
+greedy suppression).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from blob_features_reference import (candidates_reference, features_reference, greedy_nms_reference,
+                                     noise_sigma_reference)
+from blob_measure_reference import extract, measure_reference
+from carapost.core.blobs import centre
+from carapost.core.blobs import detector as det
+from carapost.core.blobs import features as fe
+from carapost.core.blobs.detector import _dedupe, _suppress, as_grey_u8, find_candidates
+from carapost.core.blobs.synth import disc_image, render, sample_frames
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """One sample-take frame per colour (camera 0, seed 0) and one cluttered synthetic frame per colour."""
+    out = []
+    for white in (False, True):
+        out.append((white, sample_frames(white, seed=0, frames=1)[0].image))
+        rng = np.random.default_rng([11, int(white)])
+        out.append((white, render(rng, 360, 640, markers=40, white=white, radius=(2.0, 12.0), noise=(1.0, 4.0),
+                                  confusers=8).image))
+    return out
+
+
+def _windows(white, image):
+    """Every candidate's window (not only the ones stage 1 passes: they include the degenerate ones)."""
+    cand, bright = find_candidates(as_grey_u8(image), white, 4.0, 50.0)
+    hp = centre.WINDOWS[-1]
+    pad = cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
+    h, w = bright.shape
+    ix = np.clip(np.rint(cand.x).astype(np.int64), 0, w - 1) + hp
+    iy = np.clip(np.rint(cand.y).astype(np.int64), 0, h - 1) + hp
+    r = np.maximum(cand.radius, 1.0)
+    return pad, ix, iy, r, centre.window_for(r), cand.noise
+
+
+def _compare(ref, new, centre_tol, extra_tol):
+    x, y, major, minor, angle, ok, extra = new
+    np.testing.assert_array_equal(ok, ref[5])
+    for a, b in ((x, ref[0]), (y, ref[1]), (major, ref[2]), (minor, ref[3])):
+        np.testing.assert_allclose(a, b, rtol=0, atol=centre_tol)
+    dang = np.abs(angle - ref[4]) % 180.0
+    assert np.minimum(dang, 180.0 - dang).max(initial=0) < 100 * centre_tol
+    np.testing.assert_allclose(extra, ref[6], rtol=extra_tol, atol=extra_tol)
+
+
+@pytest.mark.parametrize("passes", [3, 2])
+def test_measure_equals_the_numpy_mathematics_on_every_candidate(frames, passes):
+    # Against the same numpy code in float64: only the order of the sums differs (1e-11 px measured).
+    n = 0
+    for white, image in frames:
+        pad, ix, iy, r, win, noise = _windows(white, image)
+        new = centre.measure_at(pad, ix, iy, win, r, noise, passes)
+        for hw in np.unique(win):
+            k = np.flatnonzero(win == hw)
+            ref = measure_reference(extract(pad, ix[k], iy[k], hw), r[k], noise, passes, dtype=np.float64)
+            _compare(ref, tuple(v[k] for v in new), 1e-8, 1e-6)
+            n += len(k)
+    assert n > 3000
+
+
+def test_measure_matches_the_float32_version_on_real_blobs(frames):
+    """The shipped numpy version summed float32: on blobs (contrast > 10 noise) centres agree to 1e-4 px.
+
+    Its float32 sums of ~1000 products of 1e2-1e4 carry relative errors of ~1e-6;
+    measured: at most 4e-5 px.  (On windows of pure noise with one or two
+    gradient lines it decided the lines' degenerate systems by its rounding,
+    so those are not compared.)
+    """
+    white, image = frames[0]
+    pad, ix, iy, r, win, noise = _windows(white, image)
+    new = centre.measure_at(pad, ix, iy, win, r, noise, 3)
+    compared = 0
+    for hw in np.unique(win):
+        k = np.flatnonzero(win == hw)
+        ref = measure_reference(extract(pad, ix[k], iy[k], hw), r[k], noise, 3)
+        good = ref[5] & new[5][k] & (new[6][k, 0] > 10 * noise)
+        d = np.hypot(ref[0] - new[0][k], ref[1] - new[1][k])[good]
+        assert d.max(initial=0) < 1e-4
+        compared += int(good.sum())
+    assert compared > 100
+
+
+def test_measure_on_isolated_discs_and_the_patch_interface():
+    rng = np.random.default_rng(3)
+    patches, truth = [], []
+    for radius in (1.5, 3.0, 6.0):
+        for _ in range(8):
+            img, c = disc_image(rng, 21, radius, 1.0, 80.0, 60.0, 2.0, dark=False)
+            patches.append(img[:, :].astype(np.float32))
+            truth.append((c[0] - 10, c[1] - 10))
+    P = np.stack(patches)
+    r0 = np.repeat([1.5, 3.0, 6.0], 8)
+    new = centre.measure(P, r0, 2.0)
+    _compare(measure_reference(P, r0, 2.0, dtype=np.float64), new, 1e-8, 1e-6)
+    assert new[5].all()
+    err = np.hypot(new[0] - np.array(truth)[:, 0], new[1] - np.array(truth)[:, 1])
+    assert np.median(err) < 0.1
+
+
+def test_measure_refuses_windows_outside_the_image():
+    img = np.zeros((40, 40), np.uint8)
+    with pytest.raises(ValueError, match="outside"):
+        centre.measure_at(img, np.array([3]), np.array([20]), np.array([5]), np.array([2.0]), 1.0)
+    with pytest.raises(ValueError, match="5 px"):
+        centre.measure_at(img, np.array([20]), np.array([20]), np.array([1]), np.array([2.0]), 1.0)
+    assert all(len(v) == 0 for v in centre.measure_at(img, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), 1.0))
+
+
+def test_candidates_features_and_noise_equal_the_numpy_versions(frames):
+    checked = 0
+    for white, image in frames:
+        img = as_grey_u8(image)
+        assert fe.noise_sigma(img) == noise_sigma_reference(img)
+        bright = img if white else cv2.bitwise_not(img)
+        for level, lvl in fe.pyramid(bright, [1, 2, 3, 4]).items():
+            padded = cv2.copyMakeBorder(lvl, 5, 5, 5, 5, cv2.BORDER_REPLICATE)
+            for floor in (0.6, 3.0):
+                got, want = fe.candidates(padded, floor), candidates_reference(padded, floor)
+                for a, b in zip(got, want):
+                    np.testing.assert_array_equal(a, b)
+            ys, xs, v, g, _ = got
+            F = fe.features(padded, g, ys, xs, v, level, 2.0)
+            # float64 input makes the numpy version's sums exact enough to compare closely.
+            F64 = features_reference(padded.astype(np.float64), g.astype(np.float64), ys, xs, v.astype(np.float64),
+                                     level, 2.0)
+            np.testing.assert_allclose(F, F64.astype(np.float32), rtol=2e-6, atol=2e-6)
+            checked += len(ys)
+    assert checked > 2000
+
+
+def test_noise_estimate_of_tiny_and_flat_images():
+    assert fe.noise_sigma(np.zeros((3, 1), np.uint8)) == noise_sigma_reference(np.zeros((3, 1), np.uint8)) == 1.0
+    flat = np.full((20, 20), 7, np.uint8)
+    assert fe.noise_sigma(flat) == noise_sigma_reference(flat) == 0.5
+
+
+def test_suppression_equals_the_pairwise_version():
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 2, 50, 400):
+        x, y = rng.uniform(0, 60, n), rng.uniform(0, 40, n)
+        rad = rng.uniform(0.5, 6, n)
+        score = np.round(rng.uniform(0, 1, n), 1)          # ties: the stable order decides
+
+        def near(i, j, d):
+            return d < np.minimum(rad[i], rad[j]) + 1.0
+        near.reach = float(rad.max()) + 1.0 if n else 1.0
+        np.testing.assert_array_equal(_suppress(x, y, rad, score),
+                                      greedy_nms_reference(np.stack([x, y], 1), score, near))
+        r2 = np.maximum(2.0, 0.5 * rad)
+
+        def same(i, j, d):
+            return d < np.maximum(r2[i], r2[j])
+        same.reach = float(r2.max()) if n else 1.0
+        np.testing.assert_array_equal(_dedupe(x, y, rad, score), greedy_nms_reference(np.stack([x, y], 1), score, same))
+
+
+def test_detections_equal_those_of_the_numpy_paths(frames, monkeypatch):
+    """The whole detector with the kernels and with every numpy version: the same detections."""
+    def measure_at_ref(img, ix, iy, win, r, noise, passes):
+        out = [np.zeros(len(ix)) for _ in range(5)] + [np.zeros(len(ix), bool), np.zeros((len(ix), 9))]
+        for hw in np.unique(win):
+            k = np.flatnonzero(win == hw)
+            for i, v in enumerate(measure_reference(extract(img, ix[k], iy[k], hw), r[k], noise, passes)):
+                out[i][k] = v
+        return tuple(out)
+
+    new = [det.detect(image, white=white) for white, image in frames]
+    monkeypatch.setattr(det, "measure_at", measure_at_ref)
+    monkeypatch.setattr(fe, "features", features_reference)
+    monkeypatch.setattr(fe, "candidates", candidates_reference)
+    monkeypatch.setattr(fe, "noise_sigma", noise_sigma_reference)
+    old = [det.detect(image, white=white) for white, image in frames]
+    assert sum(len(r) for r in new) > 200
+    for a, b in zip(new, old):
+        assert len(a) == len(b)
+        np.testing.assert_allclose(a["x"], b["x"], atol=1e-3)
+        np.testing.assert_allclose(a["y"], b["y"], atol=1e-3)
+        np.testing.assert_allclose(a["major"], b["major"], atol=1e-3)
+        np.testing.assert_allclose(a["score"], b["score"], atol=1e-4)
