@@ -12,7 +12,8 @@ import threading
 import cv2
 import numpy as np
 
-from carapost.core.blobs.edges import MAX_MOVE, MAX_SCATTER, MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK
+from carapost.core.blobs.edges import (COARSE, INNER, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS, RAYS, REACH, STEP,
+                                       TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
 _PHI = np.linspace(0.0, 2.0 * np.pi, RAYS, endpoint=False)
@@ -58,7 +59,19 @@ def _edge_points(gx, gy, cx, cy, a, b, th):
     fall = sx
     fall += sy
     np.negative(fall, out=fall)
-    k = np.clip(np.argmax(fall, axis=2), 1, len(_T) - 2)[..., None]
+    # The innermost clear peak on the 1 px grid, then uphill on the 0.25 px samples.
+    coarse = fall[..., ::COARSE]
+    top = coarse.max(axis=2, keepdims=True)
+    lo = np.concatenate([np.full_like(coarse[..., :1], -np.inf), coarse[..., :-1]], axis=2)
+    hi = np.concatenate([coarse[..., 1:], np.full_like(coarse[..., :1], -np.inf)], axis=2)
+    peaks = (coarse >= INNER * top) & (coarse >= lo) & (coarse >= hi)
+    k = np.clip(np.argmax(peaks, axis=2) * COARSE, 1, len(_T) - 2)
+    for _ in range(COARSE):
+        f0 = np.take_along_axis(fall, k[..., None], 2)[..., 0]
+        fm = np.take_along_axis(fall, (k - 1)[..., None], 2)[..., 0]
+        fp = np.take_along_axis(fall, (k + 1)[..., None], 2)[..., 0]
+        k = np.where((fm > f0) & (k > 1), k - 1, np.where((fp > f0) & (k < len(_T) - 2), k + 1, k))
+    k = k[..., None]
     g0 = np.take_along_axis(fall, k - 1, 2)[..., 0].astype(float)
     g1 = np.take_along_axis(fall, k, 2)[..., 0].astype(float)
     g2 = np.take_along_axis(fall, k + 1, 2)[..., 0].astype(float)
@@ -95,16 +108,8 @@ def _median_of_used(r: np.ndarray, used: np.ndarray) -> np.ndarray:
     return r[np.arange(len(r)), np.maximum((n - 1) // 2, 0)]
 
 
-def refine_centres(bright: np.ndarray, x, y, major, minor, angle):
-    """:func:`carapost.core.blobs.edges.refine_centres`, in numpy (same arguments and results)."""
-    x = np.asarray(x, float).copy()
-    y = np.asarray(y, float).copy()
-    if not len(x):
-        return x, y, np.zeros(0, bool)
-    a = np.maximum(np.asarray(major, float) / 2.0, 0.5)
-    b = np.maximum(np.asarray(minor, float) / 2.0, 0.5)
-    th = np.deg2rad(np.asarray(angle, float))
-    gx, gy = _gradients(bright)
+def _fit_edges(gx, gy, x, y, a, b, th):
+    """Edge conic centres of many blobs: (dx, dy) in px, clean, spread, n."""
     ex, ey, peak = _edge_points(gx, gy, x, y, a, b, th)
     good = peak > WEAK * np.median(peak, axis=1, keepdims=True)
     good &= peak > 0
@@ -115,13 +120,37 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle):
         x0, y0, ok, res = _conic_centres(u, v, w, scale)
         spread = 1.4826 * _median_of_used(np.abs(res), w > 0) + 0.02
         w = (good & (np.abs(res) < 3.0 * spread[:, None])).astype(float)
-    shift = np.hypot(x0, y0) * scale
+    dx, dy = x0 * scale, y0 * scale
     n = w.sum(axis=1)
-    clean = ok & (n >= MIN_RAYS * RAYS) & (spread < MAX_SCATTER) & (shift < MAX_MOVE * b)
+    clean = ok & (n >= MIN_RAYS * RAYS) & (spread < MAX_SCATTER) & (np.hypot(dx, dy) < MAX_MOVE * b)
+    return dx, dy, clean, spread, n
+
+
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
+    """:func:`carapost.core.blobs.edges.refine_centres`, in numpy (same arguments and results)."""
+    x = np.asarray(x, float).copy()
+    y = np.asarray(y, float).copy()
+    if not len(x):
+        return x, y, np.zeros(0, bool)
+    a = np.maximum(np.asarray(major, float) / 2.0, 0.5)
+    b = np.maximum(np.asarray(minor, float) / 2.0, 0.5)
+    th = np.deg2rad(np.asarray(angle, float))
+    gx, gy = _gradients(bright)
+    dx, dy, clean, spread, n = _fit_edges(gx, gy, x, y, a, b, th)
+    shift = np.hypot(dx, dy)
     # The edge points' scatter over the square root of their number: the standard error of the fit's
     # centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
     noise = np.where(clean, TRUST * spread / np.sqrt(np.maximum(n, 1.0)), 1.0)
     share = np.where(clean, np.clip((shift - noise) / np.maximum(noise, 1e-9), 0.0, 1.0), 0.0)
-    x += x0 * scale * share
-    y += y0 * scale * share
+    x += dx * share
+    y += dy * share
+    if start is not None:
+        sx, sy, sr = (np.asarray(v, float) for v in start)
+        retry = np.flatnonzero(~clean & (sr > 0) & (a > MERGED * sr))
+        if len(retry):
+            r0 = np.maximum(sr[retry], 1.0)
+            dx2, dy2, clean2, _s, _n = _fit_edges(gx, gy, sx[retry], sy[retry], r0, r0, np.zeros(len(retry)))
+            got = retry[clean2]
+            x[got], y[got] = sx[got] + dx2[clean2], sy[got] + dy2[clean2]
+            share[got] = 1.0
     return x, y, share > 0

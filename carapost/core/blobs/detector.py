@@ -202,6 +202,7 @@ class Fitted:
     ok: np.ndarray        #: the fit is a plausible blob near its candidate, inside the image
     prob1: np.ndarray     #: stage-1 probability
     feats: np.ndarray     #: stage-2 features (:data:`~.model.FIT_FEATURE_NAMES`)
+    start: tuple = ()     #: the candidates' ``(x, y, radius)`` (full resolution)
 
 
 def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
@@ -239,7 +240,8 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     F[:, 10] = np.clip(moved / np.maximum(cand.radius[sel], 1.0), 0, 5)
     F[:, 11] = np.clip(contrast / np.maximum(light, 1.0), 0, 5)
     F[:, 12] = np.clip(core_std, 0, 5)
-    return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F)
+    return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F,
+                  (cand.x[sel], cand.y[sel], cand.radius[sel]))
 
 
 def detect(image, white: bool = False, threshold: float = 0.4, min_major: float = 4.0, max_major: float = 50.0,
@@ -280,7 +282,8 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     keep = idx[_dedupe(fitted.x[idx], fitted.y[idx], fitted.minor[idx], prob[idx])]
     rec = np.zeros(len(keep), DET_DTYPE)
     rec["x"], rec["y"], _ = refine_centres(bright, fitted.x[keep], fitted.y[keep], fitted.major[keep],
-                                           fitted.minor[keep], fitted.angle[keep])
+                                           fitted.minor[keep], fitted.angle[keep],
+                                           tuple(v[keep] for v in fitted.start))
     rec["major"], rec["minor"], rec["angle"] = fitted.major[keep], fitted.minor[keep], fitted.angle[keep]
     rec["score"] = prob[keep]
     rec["color"] = COLOR_WHITE if white else COLOR_BLACK

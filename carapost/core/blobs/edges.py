@@ -55,12 +55,18 @@ MAX_MOVE = 1.0
 #: (from every pixel's intensity, close to the Cramer-Rao bound on a clean dot) is kept; from there
 #: to twice that the centre moves over to the edge's gradually.
 TRUST = 8.0
+#: A blob measured this many times its candidate's radius (semi-major axis) may be a dot measured
+#: together with a darker region it touches.
+MERGED = 1.8
 #: Robust fitting rounds.
 ROUNDS = 3
 
 _SAMPLES = int(round(2 * REACH / STEP)) + 1
 #: The coarse search's step, in samples.
 COARSE = 4
+_NCOARSE = (_SAMPLES - 1) // COARSE + 1
+#: A ray's edge is its innermost local peak at least this share of the ray's highest.
+INNER = 0.6
 _COS = np.cos(2.0 * np.pi * np.arange(RAYS) / RAYS)
 _SIN = np.sin(2.0 * np.pi * np.arange(RAYS) / RAYS)
 
@@ -149,6 +155,7 @@ def _edge_points(img, cx, cy, a, b, th, ex, ey, peak):
     wx = np.empty(4)
     wy = np.empty(4)
     fall = np.empty(_SAMPLES)
+    coarse = np.empty(_NCOARSE)
     ca, sa = math.cos(th), math.sin(th)
     for k in range(RAYS):
         c, s = _COS[k], _SIN[k]
@@ -161,13 +168,21 @@ def _edge_points(img, cx, cy, a, b, th, ex, ey, peak):
         nx, ny = ca * m0 - sa * m1, sa * m0 + ca * m1
         # Coarse search, bilinear every COARSE steps; then bicubic at the peak and its neighbours (the
         # parabola's three points), moving along while the peak is not in the middle.
-        best, top = 0, -np.inf
-        for q in range(0, _SAMPLES, COARSE):
-            t = -REACH + q * STEP
+        top = -np.inf
+        for j in range(_NCOARSE):
+            t = -REACH + j * COARSE * STEP
             sx, sy = _bilinear(gx, gy, x0, y0, px + nx * t, py + ny * t)
-            f = -(sx * nx + sy * ny)
-            if f > top:
-                best, top = q, f
+            coarse[j] = -(sx * nx + sy * ny)
+            top = max(top, coarse[j])
+        # The innermost clear peak, not the highest: a dot touching a darker region (a lower lip's dot
+        # against the open mouth, a nose tip above the nostrils' shadow) has its own edge inside, and
+        # the region's edge, often steeper, farther out.
+        best = 0
+        for j in range(_NCOARSE):
+            if (coarse[j] >= INNER * top and (j == 0 or coarse[j] >= coarse[j - 1])
+                    and (j == _NCOARSE - 1 or coarse[j] >= coarse[j + 1])):
+                best = j * COARSE
+                break
         best = min(max(best, 1), _SAMPLES - 2)
         for q in range(best - 1, best + 2):
             fall[q] = _fall(gx, gy, x0, y0, px, py, nx, ny, -REACH + q * STEP, wx, wy)
@@ -265,42 +280,58 @@ def _median_of_used(r, used):
 
 
 @njit(**JIT)
-def _refine(img, x, y, major, minor, angle, ox, oy, share):
-    ex, ey, peak = np.empty(RAYS), np.empty(RAYS), np.empty(RAYS)
-    u, v, res = np.empty(RAYS), np.empty(RAYS), np.empty(RAYS)
-    w = np.empty(RAYS)
-    good = np.empty(RAYS, np.bool_)
+def _fit_edge(img, cx, cy, a, b, th, buf):
+    """Steps 5.1-5.3 for one blob from the ellipse ``(cx, cy, a, b, th)``.
+
+    Returns ``(dx, dy, clean, spread, n)``: the edge conic's centre less
+    ``(cx, cy)`` in px, whether the edge is a clean ellipse, the points' robust
+    scatter (px) and how many points the last fit kept.
+    """
+    ex, ey, peak, u, v, res, w = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
+    _edge_points(img, cx, cy, a, b, th, ex, ey, peak)
+    lim = WEAK * np.median(peak)
+    for k in range(RAYS):
+        w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 else 0.0
+        u[k], v[k] = (ex[k] - cx) / a, (ey[k] - cy) / a
+    x0 = y0 = 0.0
+    ok = False
+    spread = np.inf
+    for _ in range(ROUNDS):
+        x0, y0, ok = _conic_fit(u, v, w, a, res)
+        spread = 1.4826 * _median_of_used(res, w > 0.0) + 0.02
+        for k in range(RAYS):
+            w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 and res[k] < 3.0 * spread else 0.0
+    n = w.sum()
+    dx, dy = x0 * a, y0 * a
+    clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
+    return dx, dy, clean, spread, n
+
+
+@njit(**JIT)
+def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share):
+    buf = np.empty((7, RAYS))
     for i in range(len(x)):
         a, b = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5)
         ox[i], oy[i], share[i] = x[i], y[i], 0.0
-        _edge_points(img, x[i], y[i], a, b, math.radians(angle[i]), ex, ey, peak)
-        lim = WEAK * np.median(peak)
-        for k in range(RAYS):
-            good[k] = peak[k] > lim and peak[k] > 0.0
-            w[k] = 1.0 if good[k] else 0.0
-            u[k], v[k] = (ex[k] - x[i]) / a, (ey[k] - y[i]) / a
-        x0 = y0 = 0.0
-        ok = False
-        spread = np.inf
-        for _ in range(ROUNDS):
-            x0, y0, ok = _conic_fit(u, v, w, a, res)
-            spread = 1.4826 * _median_of_used(res, w > 0.0) + 0.02
-            for k in range(RAYS):
-                w[k] = 1.0 if good[k] and res[k] < 3.0 * spread else 0.0
-        n = w.sum()
-        shift = math.hypot(x0, y0) * a
-        if not (ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and shift < MAX_MOVE * b):
-            continue
-        # The edge points' scatter over the square root of their number: the standard error of the fit's
-        # centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
-        noise = TRUST * spread / math.sqrt(max(n, 1.0))
-        s = min(max((shift - noise) / max(noise, 1e-9), 0.0), 1.0)
-        ox[i] += x0 * a * s
-        oy[i] += y0 * a * s
-        share[i] = s
+        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf)
+        if clean:
+            # The edge points' scatter over the square root of their number: the standard error of the
+            # fit's centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
+            noise = TRUST * spread / math.sqrt(max(n, 1.0))
+            s = min(max((math.hypot(dx, dy) - noise) / max(noise, 1e-9), 0.0), 1.0)
+            ox[i] += dx * s
+            oy[i] += dy * s
+            share[i] = s
+        elif sr[i] > 0.0 and a > MERGED * sr[i]:
+            # Measured much larger than its candidate and no clean edge: the dot was measured together
+            # with a darker region it touches.  Its own edge, from the candidate (inside the dot).
+            r0 = max(sr[i], 1.0)
+            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf)
+            if clean:
+                ox[i], oy[i], share[i] = sx[i] + dx, sy[i] + dy, 1.0
 
 
-def refine_centres(bright: np.ndarray, x, y, major, minor, angle):
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
     """Centres of blobs measured again from their edges.
 
     Parameters
@@ -311,6 +342,10 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle):
     x, y, major, minor, angle : array_like
         The measured ellipses (centre; full axes, px; angle of the major axis,
         degrees).
+    start : tuple of array_like, optional
+        ``(x, y, radius)`` of each blob's candidate: where a blob measured
+        more than ``MERGED`` times its candidate's radius has no clean edge,
+        its edge is looked for around the candidate instead.
 
     Returns
     -------
@@ -321,6 +356,9 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle):
     """
     args = [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in (x, y, major, minor, angle)]
     n = len(args[0])
+    if start is None:
+        start = (np.zeros(n), np.zeros(n), np.zeros(n))
+    args += [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in start]
     ox, oy, share = np.empty(n), np.empty(n), np.empty(n)
     if n:
         _refine(np.ascontiguousarray(bright), *args, ox, oy, share)
