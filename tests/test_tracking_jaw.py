@@ -104,3 +104,149 @@ def test_close_pair_with_biased_blobs_does_not_pull_the_point_off(quiet, drop):
     err = tracked_errors(sc, m, frames)
     assert np.all(np.isfinite(err)), err                       # still tracked on every frame
     assert err.max() < NARROW_DEPTH_MM + 0.5, err
+
+
+# ---------------------------------------------------------------- rules of one frame, on exact data
+# These call the frame tracker's sub-steps on the quiet take's frame 0 (true positions, every point
+# seen by all four cameras unless a test says otherwise), so each rule is checked on its own.
+
+def frame_zero(sc):
+    """A tracker started on frame 0's true positions, and that frame's rig."""
+    from carapost.core.tracking.engine import FrameTracker
+    from carapost.core.tracking.geometry import RigState
+    from carapost.core.tracking.params import TrackingParams
+
+    rig = RigState(sc.project.rig.cameras_at(0))
+    X = sc.face[0].astype(float).copy()
+    S = rig.S
+    none = np.full((len(X), S, 2), np.nan)
+    return FrameTracker(rig, X, none, none, np.zeros((0, 3)), TrackingParams()), rig, X
+
+
+def pair_only(X, m, S=4):
+    valid = np.ones((len(X), S), bool)
+    valid[m, list(OTHER)] = False
+    return valid
+
+
+def pair_direction(rig, X, valid, m):
+    from carapost.core.tracking.geometry import depth_uncertainty
+
+    u, mm = depth_uncertainty(rig, X, valid)
+    from carapost.core.tracking.engine import NARROW_MM_PER_PX
+    assert mm[m] > NARROW_MM_PER_PX                 # the test's premise: the pair is too close
+    return u[m]
+
+
+def test_a_wrongly_triangulated_neighbour_does_not_drag_a_close_pair_point(quiet):
+    """A wide pair can triangulate a wrong correspondence consistently, 12 mm off (take_100_2 frame 72).
+
+    That neighbour held the heaviest weight of a chin point's prediction, and the chin point, seen
+    by the close pair only, was moved to within 1 mm of that prediction: 10.7 mm off its marker.
+    A neighbour farther from its own prediction than Max Allowed 3D Point Error is not firm.
+    """
+    from carapost.core.tracking.engine import NARROW_DEPTH_MM
+
+    T, rig, X = frame_zero(quiet)
+    m = 5
+    valid = pair_only(X, m)
+    u = pair_direction(rig, X, valid, m)
+    truth = X[m].copy()
+    X[m] += 3.0 * u                                  # the pair's biased depth: to be held
+    j = T.nb[m, 0]
+    X[j] += np.array([12.0, 0.0, 0.0])               # the mistriangulated neighbour...
+    T.w[m] = 1.0
+    T.w[m, 0] = 100.0                                # ...with the heaviest weight
+    Xo, _, clamped = T._steady_depth(rig, X, valid, np.ones(len(X), bool))
+    assert clamped[m]
+    assert np.linalg.norm(Xo[m] - truth) < NARROW_DEPTH_MM + 0.2
+
+
+def test_a_close_pair_is_trusted_where_its_neighbours_disagree_about_its_depth(quiet):
+    """A jaw point between the still cheek and the moving chin (take_100_0_300, Jaw_L_2, frames 55-66).
+
+    Its neighbours' votes along the pair's viewing direction spread over 15 mm; their weighted
+    median is 2-5 mm off, and the close pair, right to 0.1 mm, was held 1 mm from it (4.4 mm off).
+    The depth is now held only within the votes' spread of the prediction.
+    """
+    T, rig, X = frame_zero(quiet)
+    m = 5
+    valid = pair_only(X, m)
+    u = pair_direction(rig, X, valid, m)
+    # Stale offsets: each vote lands this far along the viewing direction from the marker.
+    T.off[m] += np.array([0.0, 4.0, 8.0, -1.0, 12.0, -3.0])[:, None] * u
+    Xo, pred, _ = T._steady_depth(rig, X.copy(), valid, np.ones(len(X), bool))
+    assert np.linalg.norm(pred[m] - X[m]) > 1.5      # the premise: a prediction off by more than the clamp
+    assert np.linalg.norm(Xo[m] - X[m]) < 0.05
+
+
+def test_votes_that_agree_still_hold_a_biased_pair(quiet):
+    """The other side of the rule above: neighbours that agree hold the close pair's depth to 1 mm."""
+    from carapost.core.tracking.engine import NARROW_DEPTH_MM
+
+    T, rig, X = frame_zero(quiet)
+    m = 5
+    valid = pair_only(X, m)
+    u = pair_direction(rig, X, valid, m)
+    truth = X[m].copy()
+    X[m] += 4.0 * u
+    T.off[m] += np.array([0.0, 0.1, -0.1, 0.2, -0.2, 0.0])[:, None] * u
+    Xo, _, clamped = T._steady_depth(rig, X, valid, np.ones(len(X), bool))
+    assert clamped[m]
+    assert np.linalg.norm(Xo[m] - truth) < NARROW_DEPTH_MM + 0.25
+
+
+def test_patch_views_with_nothing_to_check_them_against_are_dropped(quiet):
+    """Two patch views and no blob nor measured neighbour (take_100_0_300, Chin_C_3, frame 38).
+
+    Patches over the skin near a turned-away chin dot met 28 mm off it; with no blob view and no
+    neighbours' prediction there is nothing to check them against, so they go.  The same patches
+    beside measured neighbours that agree with them stay.
+    """
+    from carapost.core.points import SRC_DETECTION, SRC_NONE, SRC_PATCH
+    from carapost.core.tracking.geometry import reprojection, triangulate
+
+    T, rig, X = frame_zero(quiet)
+    m = 5
+    uv = rig.project(X)
+    for alone in (True, False):
+        src = np.full((len(X), rig.S), SRC_DETECTION, np.uint8)
+        src[m] = [SRC_PATCH, SRC_PATCH, SRC_NONE, SRC_NONE]
+        valid = src != SRC_NONE
+        Xt = triangulate(rig, uv, valid)
+        if alone:
+            Xt[np.arange(len(X)) != m] = np.nan      # no neighbour measured: no prediction
+        err = reprojection(rig, Xt, uv, valid)
+        T._check_patches(rig, Xt, err, uv.copy(), src)
+        kept = np.count_nonzero(src[m] == SRC_PATCH)
+        assert kept == (0 if alone else 2), alone
+
+
+def test_a_close_pair_far_off_in_depth_is_a_mismatch_not_a_bias(quiet):
+    """A lower lip's close pair that met 16 mm deep (take_100_0_300, Lip_Lower_L, frame 154).
+
+    Held 1 mm from its prediction it passed Remove Bad 3D Points 5.3 mm off its marker.  Grazing
+    bias moves a close pair a few mm; this far, one blob is another dot, so the point is not held
+    but dropped on those frames.
+    """
+    sc = copy.deepcopy(quiet)
+    m, frames = 5, range(10, 14)
+    biased_pair(sc, m, frames, 16.0, OTHER)
+    err = tracked_errors(sc, m, frames)
+    assert not np.any(err > 3.0), err
+    assert np.all(np.isnan(err)), err                          # lost there, not placed
+
+
+def test_a_close_pair_beyond_the_mismatch_limit_is_not_held(quiet):
+    """The rule on its own: no clamp past NARROW_MISMATCH x Max Allowed 3D Point Error."""
+    from carapost.core.tracking.engine import NARROW_MISMATCH
+
+    T, rig, X = frame_zero(quiet)
+    m = 5
+    valid = pair_only(X, m)
+    u = pair_direction(rig, X, valid, m)
+    far = X[m] + (NARROW_MISMATCH * T.p.max_allowed_3d_point_error + 1.0) * u
+    X[m] = far
+    Xo, _, clamped = T._steady_depth(rig, X, valid, np.ones(len(X), bool))
+    assert not clamped[m]
+    assert np.allclose(Xo[m], far)

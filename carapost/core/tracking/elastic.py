@@ -81,7 +81,10 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
         Neighbour positions to predict from.
     available : ndarray (N,) bool
         Which rows of ``X`` may be used.
-    weight : ndarray (N, K), optional
+    nb, off : ndarray (n, K), (n, K, 3)
+        Neighbours and offsets of the points to predict: all N, or some rows of
+        them (then the results are for those rows only).
+    weight : ndarray (n, K), optional
         Per-neighbour weights (:func:`weights`): a weighted median per
         coordinate; None gives every neighbour the same say.
 
@@ -96,7 +99,7 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
     use = (nb >= 0) & available[safe] & np.all(np.isfinite(off), axis=2)
     cand = np.where(use[..., None], X[safe] + off, np.nan)
     count = use.sum(axis=1)
-    pred = np.full((len(X), 3), np.nan)
+    pred = np.full((len(nb), 3), np.nan)
     ok = count >= min_neighbours
     if not np.any(ok):
         return pred, count

@@ -44,6 +44,9 @@ NARROW_MM_PER_PX = 1.2
 #: Such a point's depth may lie this far (mm) from its firmly seen neighbours' prediction: farther,
 #: and it is brought back to this distance (grazing or half-hidden dots are detected 1-3 px off).
 NARROW_DEPTH_MM = 1.0
+#: ...unless it lies more than this many times Max Allowed 3D Point Error from it: then one blob is
+#: another dot (a bias is a few mm), and the point is left to Remove Bad 3D Points.
+NARROW_MISMATCH = 2.0
 #: Held-out view errors above this many robust standard deviations of the frame's are mismatches...
 HELD_OUT_SIGMAS = 8.0
 #: ...but never below this (px), so that a frame of perfect data does not reject sub-pixel noise.
@@ -267,8 +270,8 @@ class FrameTracker:
         Xp = np.where(np.isfinite(self.V), self.X + self.V, self.X)
         lost = ~tracked
         if np.any(lost):
-            el, _ = elastic.predict(Xp, tracked, self.nb, self.off, weight=self.w)
-            Xp[lost] = np.where(np.isfinite(el[lost]), el[lost], self.X_last[lost])
+            el = self._predict(Xp, tracked, lost)
+            Xp[lost] = np.where(np.isfinite(el), el, self.X_last[lost])
         det = np.full((N, S), -1)
         src = np.zeros((N, S), np.uint8)
         uv_c = np.full((N, S, 2), np.nan)
@@ -438,6 +441,10 @@ class FrameTracker:
                            bdet, buv_raw, bscore, berr)
 
     # --------------------------------------------------------------- sub-steps
+    def _predict(self, X, available, rows):
+        """Elastic prediction of ``rows`` only (``X``, ``available``: every point)."""
+        return elastic.predict(X, available, self.nb[rows], self.off[rows], weight=self.w[rows])[0]
+
     def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det):
         p = self.p
         recent = (self.blob_frame >= 0) & (np.abs(frame - self.blob_frame) <= PATCH_VIEW_FRAMES)
@@ -527,7 +534,7 @@ class FrameTracker:
         if len(rows):
             # Hold out each view in turn: the wrong one is the view the others agree least with
             # (not the one with the largest residual, which a wrong view may push onto a good one).
-            held, Xs = held_out_errors(rig, uv_c[rows], valid[rows])
+            held, Xs = held_out_errors(rig, uv_c[rows], valid[rows], X[rows])
             worst = np.argmax(held, axis=1)
             e = held[np.arange(len(rows)), worst]
             limit = held_out_limit(e, self.p.max_allowed_2d_projection_error)
@@ -568,12 +575,14 @@ class FrameTracker:
             e = reprojection(rig, Xb, uv_c[r], patch[r])
             drop[two] = patch[r] & (np.nan_to_num(e, nan=np.inf) > PATCH_AGREE_PX)
         measured = np.all(np.isfinite(X), axis=1)
-        pred, _ = elastic.predict(X, measured & ~patch.any(1), self.nb, self.off, weight=self.w)
         few = ~two & measured[rows]
         if np.any(few):
             r = rows[few]
-            dev = np.linalg.norm(X[r] - pred[r], axis=1)
-            drop[few] = patch[r] & (np.nan_to_num(dev, nan=0.0) > PATCH_3D_MM)[:, None]
+            dev = np.linalg.norm(X[r] - self._predict(X, measured & ~patch.any(1), r), axis=1)
+            # Patches alone, with nothing to check them against, are not evidence enough (two patches
+            # over skin near a turned-away chin dot meet anywhere along their rays).
+            unchecked = np.isnan(dev) & ~blob[few].any(1)
+            drop[few] = patch[r] & ((np.nan_to_num(dev, nan=0.0) > PATCH_3D_MM) | unchecked)[:, None]
         if not np.any(drop):
             return
         b, s = np.nonzero(drop)
@@ -594,7 +603,11 @@ class FrameTracker:
         of its firmly seen neighbours is moved along its viewing direction to that
         distance (its image positions hardly change).  Points without firm neighbours
         (a cheek seen from one side only) keep their own depth: predictions from other
-        narrow points would only pass the same error around.
+        narrow points would only pass the same error around.  Where the neighbours'
+        votes disagree along the viewing direction by more than ``NARROW_DEPTH_MM``,
+        their spread is the bound instead (:meth:`_vote_spread`); a point beyond
+        ``NARROW_MISMATCH`` x Max Allowed 3D Point Error is a mismatch and is left
+        as it is for Remove Bad 3D Points.
 
         Returns
         -------
@@ -611,18 +624,50 @@ class FrameTracker:
         clamped = np.zeros(len(X), bool)
         if not np.any(narrow):
             return X, pred, clamped
-        firm_pred, _ = elastic.predict(X, measured & ~narrow, self.nb, self.off, weight=self.w)
+        # Firm: seen from both sides and where its own neighbours put it.  A wide pair can triangulate
+        # a wrong correspondence consistently (Remove Bad 3D Points drops it later), and one such
+        # neighbour with a heavy weight would otherwise drag every narrow point near it.
+        dev = np.linalg.norm(X - pred, axis=1)
+        firm = measured & ~narrow & ~(dev > float(self.p.max_allowed_3d_point_error))
+        firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w)
         has_firm = np.all(np.isfinite(firm_pred), axis=1)
         pred[has_firm] = firm_pred[has_firm]
         rows = np.flatnonzero(narrow & np.all(np.isfinite(pred), axis=1))
         if len(rows) == 0:
             return X, pred, clamped
         along = np.einsum("ni,ni->n", X[rows] - pred[rows], u[rows])
-        excess = along - np.clip(along, -NARROW_DEPTH_MM, NARROW_DEPTH_MM)
+        voters = np.where(has_firm[rows, None], firm[None], measured[None])
+        bound = np.maximum(NARROW_DEPTH_MM, self._vote_spread(X, voters, rows, pred[rows], u[rows]))
+        excess = along - np.clip(along, -bound, bound)
+        if self.p.remove_bad_3d_points:
+            # Farther than any grazing bias: a wrong blob, not a biased one.  Moved to the bound it
+            # would pass as a point millimetres off; left where it is, Remove Bad 3D Points drops it.
+            lim = NARROW_MISMATCH * float(self.p.max_allowed_3d_point_error)
+            excess = np.where(np.abs(along) > np.maximum(bound, lim), 0.0, excess)
         X = X.copy()
         X[rows] -= excess[:, None] * u[rows]
         clamped[rows] = excess != 0
         return X, pred, clamped
+
+    def _vote_spread(self, X, available, rows, pred, u):
+        """Weighted robust spread (mm) along ``u`` of the neighbour votes behind ``pred`` for ``rows``.
+
+        ``available`` (n, N) bool: the points each row's prediction was made from.
+        Where the neighbours a point moves with disagree about its depth (a jaw point
+        between the still cheek and the moving chin), their prediction is no firmer
+        than two close cameras, and the depth is held only within this spread of it.
+        """
+        nb = self.nb[rows]
+        safe = np.maximum(nb, 0)
+        use = (nb >= 0) & np.take_along_axis(available, safe, 1) & np.all(np.isfinite(self.off[rows]), axis=2)
+        dev = np.abs(np.einsum("nki,ni->nk", X[safe] + self.off[rows] - pred[:, None, :], u))
+        w = np.where(use, self.w[rows], 0.0)
+        dev = np.where(use, dev, np.inf)
+        order = np.argsort(dev, axis=1)
+        cw = np.cumsum(np.take_along_axis(w, order, 1), axis=1)
+        half = np.argmax(cw >= 0.5 * cw[:, -1:], axis=1)
+        spread = 1.4826 * np.take_along_axis(dev, order, 1)[np.arange(len(rows)), half]
+        return np.where(np.isfinite(spread) & (cw[:, -1] > 0), spread, 0.0)
 
     def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back, pred):
         """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction.
@@ -665,15 +710,17 @@ class FrameTracker:
         """Points on the ray of their one sample, at the depth nearest the neighbours' prediction."""
         N = len(X)
         out = np.full((N, 3), np.nan)
-        pred, _ = elastic.predict(X, measured, self.nb, self.off, weight=self.w)
-        rows = np.flatnonzero(one & np.all(np.isfinite(pred), axis=1))
+        rows = np.flatnonzero(one)
+        pred = self._predict(X, measured, rows)
+        keep = np.all(np.isfinite(pred), axis=1)
+        rows, pred = rows[keep], pred[keep]
         if len(rows) == 0:
             return out
         s = np.argmax(valid[rows], axis=1)
         o, d = rig.rays(s, uv_c[rows, s])
-        t = np.einsum("ni,ni->n", pred[rows] - o, d)
+        t = np.einsum("ni,ni->n", pred - o, d)
         Xr = o + t[:, None] * d
-        dist = np.linalg.norm(Xr - pred[rows], axis=1)
+        dist = np.linalg.norm(Xr - pred, axis=1)
         ok = (t > 0) & (dist <= self.p.single_sensor_tracking_threshold)
         out[rows[ok]] = Xr[ok]
         return out

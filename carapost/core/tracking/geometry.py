@@ -43,11 +43,13 @@ class RigState:
         self.Kinv = np.linalg.inv(self.K)
         self.R = np.stack([np.asarray(c.rotation, float) for c in cameras])
         self.C = np.stack([np.asarray(c.position, float) for c in cameras])
+        self._P_of = None
 
     def copy(self) -> "RigState":
         out = RigState.__new__(RigState)
         out.cameras, out.K, out.Kinv = self.cameras, self.K, self.Kinv
         out.R, out.C = self.R.copy(), self.C.copy()
+        out._P_of = None
         return out
 
     @property
@@ -55,9 +57,15 @@ class RigState:
         return len(self.cameras)
 
     def P(self) -> np.ndarray:
-        """``(S, 3, 4)`` projection matrices to corrected pixels."""
-        Rt = np.concatenate([self.R, -np.einsum("sij,sj->si", self.R, self.C)[..., None]], axis=2)
-        return self.K @ Rt
+        """``(S, 3, 4)`` projection matrices to corrected pixels (read only).
+
+        Kept until ``R`` or ``C`` is replaced (poses are only ever assigned whole, never
+        edited in place): every projection and triangulation of a frame asks for them.
+        """
+        if self._P_of is None or self._P_of[0] is not self.R or self._P_of[1] is not self.C:
+            Rt = np.concatenate([self.R, -np.einsum("sij,sj->si", self.R, self.C)[..., None]], axis=2)
+            self._P_of = (self.R, self.C, self.K @ Rt)
+        return self._P_of[2]
 
     def to_cameras(self) -> list[Camera]:
         return [c.with_pose(self.R[s], self.C[s]) for s, c in enumerate(self.cameras)]
@@ -155,7 +163,8 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarra
     return out
 
 
-def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
+                    X: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each view's error against the point triangulated from the other views.
 
     Parameters
@@ -163,6 +172,8 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> tuple
     uv_c : ndarray (N, S, 2)
     valid : ndarray (N, S) bool
         Rows need 3+ valid views.
+    X : ndarray (N, 3), optional
+        The points triangulated from all their views, when already known.
 
     Returns
     -------
@@ -174,7 +185,8 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> tuple
     """
     P = rig.P()
     uv = np.where(valid[..., None], uv_c, 0.0)
-    X = triangulate(rig, uv_c, valid)
+    if X is None:
+        X = triangulate(rig, uv_c, valid)
     w = _depth_weights(P, X, valid)
     M, b = _view_equations(P, uv, w)
     Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)             # (N, S, 3) without view s
