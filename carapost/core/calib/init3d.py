@@ -41,6 +41,9 @@ REJECT_PX = 2.0
 #: error out among the good views).
 LOO_PX = 0.6
 LOO_AGREE_PX = 0.25
+#: Once growth within Max Allowed Depth stops, matches the other caddy confirms may lie this many times
+#: farther from the points.
+RELAXED_DEPTH = 3.0
 #: A candidate pair is supported by another camera with a detection this close (px) to its projection...
 SUPPORT_GATE_PX = 3.0
 #: ...and a candidate without that support counts as this much farther from its epipolar line (px).
@@ -136,19 +139,30 @@ def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi, support=Non
     good = np.all(np.isfinite(X), axis=1)
     good[good] &= (cam_a.depth(X[good]) > 0) & (cam_b.depth(X[good]) > 0)
     ia, ib, d, X = ia[good], ib[good], d[good], X[good]
+    supported = np.zeros(len(X), bool)
     if support is not None and len(X):
-        d = d + UNSUPPORTED_PENALTY_PX * (support(X) == 0)
+        supported = support(X) > 0
+        d = d + UNSUPPORTED_PENALTY_PX * ~supported
     free_a = np.ones(len(xy_a), bool)
     free_b = np.ones(len(xy_b), bool)
     pts = [np.asarray(seeds_X, float)]
     out = []
     alive = np.ones(len(ia), bool)
+    reach, relaxed = max_depth, False
     while True:
         tree = cKDTree(np.concatenate(pts))
         idx = np.flatnonzero(alive)
-        near = tree.query(X[idx], distance_upper_bound=max_depth)[0] <= max_depth
+        near = tree.query(X[idx], distance_upper_bound=reach)[0] <= reach
+        if relaxed:
+            near &= supported[idx]
         if not np.any(near):
-            break
+            if relaxed or support is None:
+                break
+            # Growth stalls where markers are sparser than Max Allowed Depth (an eye socket, a nostril
+            # between the nose and the lip on a 100-marker set with the dense set's 16 mm): go on, farther,
+            # with the matches the other caddy confirms.
+            reach, relaxed = RELAXED_DEPTH * max_depth, True
+            continue
         # Clear among every free candidate, not only those near the points grown so far: a wrong
         # match that happens to land near them must not win just because the right one lies
         # farther out and is not considered yet.
