@@ -33,15 +33,12 @@ import numpy as np
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from carapost.core.blob_ops import detect_blobs_current_frame  # noqa: E402
 from carapost.core.blobs.synth import sample_frames  # noqa: E402
-from carapost.core.document import Document  # noqa: E402
 from carapost.core.pipeline import process_to_init3d  # noqa: E402
 from carapost.core.points import FACE, SRC_DETECTION, ST_NONE  # noqa: E402
 from carapost.io.brim_svg import read_brim_svg  # noqa: E402
-from carapost.io.imports import import_xcp  # noqa: E402
-from carapost.io.take import project_from_input  # noqa: E402
 from carapost.sample import write_sample  # noqa: E402
+from carapost.sample.trial import open_sample_take  # noqa: E402
 
 TOL_PX = 1.5
 
@@ -95,14 +92,8 @@ def one(markers: int, seed: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         write_sample(d, markers=markers, frames=1, seed=seed, workers=1)
-        truth = dict(np.load(d / "truth.npz"))
-        project = project_from_input(str(d / "Sample_0.pico"), None)
-        doc = Document(project)
-        if markers > 60:
-            project.properties.set("initialize_3d.max_allowed_depth", 16.0)
-        doc.run(import_xcp(project, d / "calibration.xcp", None))
         t0 = time.perf_counter()
-        doc.run(detect_blobs_current_frame(project, 0))
+        project, doc, truth = open_sample_take(d, markers)
         t1 = time.perf_counter()
         seeds = json.loads((d / "seeds.json").read_text())
         process_to_init3d(project, seeds, read_brim_svg(d / "brim.svg"), log=lambda s: None, stack=doc.stack)

@@ -30,17 +30,14 @@ import numpy as np
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from carapost.core.blob_ops import detect_blobs_range  # noqa: E402
 from carapost.core.blobs.synth import sample_frames  # noqa: E402
-from carapost.core.document import Document  # noqa: E402
 from carapost.core.pipeline import process_to_init3d  # noqa: E402
 from carapost.core.points import ST_NONE, ST_RECONSTRUCTED  # noqa: E402
 from carapost.core.tracking import track  # noqa: E402
 from carapost.io.brim_svg import read_brim_svg  # noqa: E402
 from carapost.io.frames import TakeFrames  # noqa: E402
-from carapost.io.imports import import_xcp  # noqa: E402
-from carapost.io.take import project_from_input  # noqa: E402
 from carapost.sample import write_sample  # noqa: E402
+from carapost.sample.trial import open_sample_take  # noqa: E402
 
 SWAP_MM = 3.0
 
@@ -92,13 +89,7 @@ def one(markers: int, seed: int, frames: int) -> dict:
         t0 = time.perf_counter()
         write_sample(d, markers=markers, frames=frames, seed=seed)
         t1 = time.perf_counter()
-        truth = dict(np.load(d / "truth.npz"))
-        project = project_from_input(str(d / "Sample_0.pico"), None)
-        doc = Document(project)
-        if markers > 60:
-            project.properties.set("initialize_3d.max_allowed_depth", 16.0)
-        doc.run(import_xcp(project, d / "calibration.xcp", None))
-        doc.run(detect_blobs_range(project, 0, frames - 1))
+        project, doc, truth = open_sample_take(d, markers, 0, frames - 1)
         t2 = time.perf_counter()
         seeds = json.loads((d / "seeds.json").read_text())
         process_to_init3d(project, seeds, read_brim_svg(d / "brim.svg"), log=lambda s: None, stack=doc.stack)
