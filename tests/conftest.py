@@ -11,6 +11,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from support import make_project  # noqa: E402
 
 
+def pytest_sessionstart(session):
+    """Compile the blob kernels once, first: in a fresh clone that takes ~25 s, which must not fall
+    inside a test's own time limit (a GUI test waits 20 s for Detect Blobs)."""
+    from carapost.core.blobs import warm_up
+
+    warm_up()
+
+
 @pytest.fixture
 def project():
     return make_project()

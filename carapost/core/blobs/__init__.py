@@ -11,7 +11,8 @@ from ..detections import DET_DTYPE
 from .detector import as_grey_u8, detect
 from .model import BlobModel, default_model
 
-__all__ = ["detect", "detect_with_properties", "detect_with_settings", "as_grey_u8", "BlobModel", "default_model", "blob_settings"]
+__all__ = ["detect", "detect_with_properties", "detect_with_settings", "as_grey_u8", "BlobModel", "default_model", "blob_settings",
+           "warm_up"]
 
 
 def blob_settings(properties) -> list[dict]:
@@ -37,3 +38,28 @@ def detect_with_settings(image, settings: list[dict]) -> np.ndarray:
         as_grey_u8(image)  # still refuse unusable images clearly
         return np.zeros(0, DET_DTYPE)
     return np.concatenate(parts) if len(parts) > 1 else parts[0]
+
+
+def warm_up() -> float:
+    """Compile (or load from numba's disk cache) every blob-detection kernel; returns the seconds it took.
+
+    The first detection after installing carapost, or after a kernel changed,
+    compiles them (~20-40 s on a 2-core machine); later processes load them in
+    well under a second.  Call this where that first wait must not fall on a
+    user's click or a timed step (the test suite does at its start).
+    """
+    import time
+
+    from .synth import disc_image
+
+    t = time.perf_counter()
+    rng = np.random.default_rng(0)
+    img = np.full((96, 96), 150.0)
+    for cx, cy, r in ((30.3, 30.6, 4.0), (64.7, 40.2, 3.0), (45.1, 70.8, 5.0)):
+        disc, _ = disc_image(rng, 41, r, 1.0, 110.0, 0.0, 1.0, centre=(20 + cx % 1, 20 + cy % 1))
+        x0, y0 = int(cx) - 20, int(cy) - 20
+        img[y0:y0 + 41, x0:x0 + 41] -= disc
+    img = np.clip(img, 0, 255).astype(np.uint8)
+    detect(img)
+    detect(255 - img, white=True)
+    return time.perf_counter() - t
