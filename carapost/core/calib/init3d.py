@@ -247,6 +247,8 @@ def initialize_3d(project, frame: int, params: dict | None = None):
     for g in grown:
         g["uv"] = np.array([xy[s][g["det"][s]] if g["det"][s] >= 0 else (np.nan, np.nan) for s in range(S)])
     pts = _merge(pts + grown, p["max_3d_distance_to_merge"])
+    pts = _repair_unsupported(pts, cams, xy, blocked, project.caddies(),
+                              p["max_allowed_symmetric_epipolar_distance"], p["max_allowed_depth"])
     # Bundle, attach in further channels, reject misfits, bundle again.
     brim = [q for q in project.points.values() if q.kind == BRIM and project.brim is not None
             and 0 <= q.brim_index < len(project.brim) and np.any(q.src[frame] != SRC_NONE)]
@@ -318,6 +320,68 @@ def odd_views_out(cams, uv: np.ndarray) -> np.ndarray:
     has = cand.any(axis=1)
     bad[np.flatnonzero(has), worst[has]] = True
     return bad
+
+
+def _repair_unsupported(pts, cams, xy, blocked, caddies, max_epi, max_depth):
+    """Re-pair the grown two-view points that the other caddy does not see, across the caddies.
+
+    A caddy's two cameras are close: a detection pulled off its dot along their
+    epipolar line (a nose tip's blob merged with the nostrils' shadow) still
+    matches, and the point lands millimetres deep, where the other caddy sees
+    nothing.  If one of its two detections matches a free detection of the other
+    caddy unambiguously, the point made from those two lies near the face (within
+    Max Allowed Depth of another point) and the point's other detection
+    disagrees with it, the point is made again from the cross-caddy pair.
+    """
+    S = len(cams)
+    other = {}
+    for a, b in caddies:
+        for c1, c2 in caddies:
+            if (c1, c2) != (a, b):
+                other[a] = other[b] = (c1, c2)
+    used = [np.zeros(len(xy[s]), bool) for s in range(S)]
+    for d in pts:
+        for s in range(S):
+            if d["det"][s] >= 0:
+                used[s][d["det"][s]] = True
+    all_X = np.array([d["X"] for d in pts])
+    for k, d in enumerate(pts):
+        views = np.flatnonzero(d["det"] >= 0)
+        if d["id"] is not None or len(views) != 2 or views[0] not in other:
+            continue
+        if other_view_support(cams, xy, d["X"][None], tuple(views))[0] > 0:
+            continue
+        rest = np.delete(all_X, k, axis=0)
+        for v, w in ((views[0], views[1]), (views[1], views[0])):
+            found = None
+            for c in other[v]:
+                free = np.flatnonzero(~blocked[c] & ~used[c])
+                if not len(free):
+                    continue
+                D = symmetric_epipolar_distance(cams[v], xy[v][d["det"][v]][None, None], cams[c], xy[c][free][None])[0]
+                order = np.argsort(D)
+                if D[order[0]] > max_epi or (len(order) > 1 and D[order[1]] < CLEAR_RATIO * D[order[0]]):
+                    continue
+                j = free[order[0]]
+                X = triangulate_many([cams[v], cams[c]], np.array([[xy[v][d["det"][v]], xy[c][j]]]))[0]
+                if not np.all(np.isfinite(X)) or not len(rest):
+                    continue
+                if np.min(np.linalg.norm(rest - X, axis=1)) > max_depth:
+                    continue
+                if np.linalg.norm(cams[w].project(X[None])[0] - xy[w][d["det"][w]]) <= REJECT_PX:
+                    continue
+                found = (c, j, X)
+                break
+            if found is None:
+                continue
+            c, j, X = found
+            used[w][d["det"][w]] = False
+            used[c][j] = True
+            d["det"][w], d["uv"][w] = -1, (np.nan, np.nan)
+            d["det"][c], d["uv"][c] = j, xy[c][j]
+            d["X"] = X
+            break
+    return pts
 
 
 def _merge(pts, dist):
