@@ -33,23 +33,16 @@ import numpy as np
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from carapost.core.blobs.synth import sample_frames  # noqa: E402
-from carapost.core.pipeline import process_to_init3d  # noqa: E402
 from carapost.core.points import FACE, SRC_DETECTION, ST_NONE  # noqa: E402
-from carapost.io.brim_svg import read_brim_svg  # noqa: E402
 from carapost.sample import write_sample  # noqa: E402
-from carapost.sample.trial import open_sample_take  # noqa: E402
+from carapost.sample.trial import faint_by_camera, initialise_from_seeds, open_sample_take, seen  # noqa: E402
 
 TOL_PX = 1.5
 
 
 def score(project, truth: dict, faint: list[set], markers: int) -> dict:
     """Score frame 0 of an initialised sample project against its truth (see the module's docstring)."""
-    uv, vis = truth["uv"][0], truth["visible"][0].astype(bool).copy()
-    for s, names in enumerate(faint):
-        for m, lab in enumerate(truth["labels"]):
-            if lab in names:
-                vis[s, m] = False
+    uv, vis = truth["uv"][0], seen(truth["visible"][0], truth["labels"], faint)
     owner = []
     for s in range(4):
         rec = project.detections[s].frame(0)
@@ -95,11 +88,9 @@ def one(markers: int, seed: int) -> dict:
         t0 = time.perf_counter()
         project, doc, truth = open_sample_take(d, markers)
         t1 = time.perf_counter()
-        seeds = json.loads((d / "seeds.json").read_text())
-        process_to_init3d(project, seeds, read_brim_svg(d / "brim.svg"), log=lambda s: None, stack=doc.stack)
+        initialise_from_seeds(d, project, doc)
         t2 = time.perf_counter()
-        faint = [set(f.faint_names or ()) for f in sample_frames(False, seed=seed, frames=1, markers=markers)]
-        out = score(project, truth, faint, markers)
+        out = score(project, truth, faint_by_camera(markers, seed), markers)
         out.update(detect_s=round(t1 - t0, 2), solve_and_init_s=round(t2 - t1, 2))
         return out
 

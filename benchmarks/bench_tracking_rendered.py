@@ -30,26 +30,19 @@ import numpy as np
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from carapost.core.blobs.synth import sample_frames  # noqa: E402
-from carapost.core.pipeline import process_to_init3d  # noqa: E402
 from carapost.core.points import ST_NONE, ST_RECONSTRUCTED  # noqa: E402
 from carapost.core.tracking import track  # noqa: E402
-from carapost.io.brim_svg import read_brim_svg  # noqa: E402
 from carapost.io.frames import TakeFrames  # noqa: E402
 from carapost.sample import write_sample  # noqa: E402
-from carapost.sample.trial import open_sample_take  # noqa: E402
+from carapost.sample.trial import faint_by_camera, initialise_from_seeds, open_sample_take, seen  # noqa: E402
 
 SWAP_MM = 3.0
 
 
 def score(project, truth: dict, faint: list[set], markers: int) -> dict:
     """Coverage, swaps and accuracy of the tracked face points against the truth (module docstring)."""
-    face, vis = truth["face_xyz"], truth["visible"].astype(bool).copy()          # (F, M, 3), (F, 4, M+B)
     labels = [str(v) for v in truth["labels"]]
-    for s, names in enumerate(faint):
-        for m, lab in enumerate(labels):
-            if lab in names:
-                vis[:, s, m] = False
+    face, vis = truth["face_xyz"], seen(truth["visible"], labels, faint)          # (F, M, 3), (F, 4, M+B)
     F = face.shape[0]
     pts = list(project.face_points())
     pos = np.array([np.where((q.status[:F] != ST_NONE)[:, None], q.pos[:F], np.nan) for q in pts])
@@ -91,14 +84,12 @@ def one(markers: int, seed: int, frames: int) -> dict:
         t1 = time.perf_counter()
         project, doc, truth = open_sample_take(d, markers, 0, frames - 1)
         t2 = time.perf_counter()
-        seeds = json.loads((d / "seeds.json").read_text())
-        process_to_init3d(project, seeds, read_brim_svg(d / "brim.svg"), log=lambda s: None, stack=doc.stack)
+        initialise_from_seeds(d, project, doc)
         images = TakeFrames(project)
         t3 = time.perf_counter()
         doc.run(track(project, 0, +1, images=images))
         t4 = time.perf_counter()
-        faint = [set(f.faint_names or ()) for f in sample_frames(False, seed=seed, frames=1, markers=markers)]
-        out = score(project, truth, faint, markers)
+        out = score(project, truth, faint_by_camera(markers, seed), markers)
         out.update(render_s=round(t1 - t0, 1), detect_s=round(t2 - t1, 1),
                    tracking_fps=round((frames - 1) / (t4 - t3), 1))
         return out

@@ -76,7 +76,7 @@ def test_rendered_sample_lips_are_not_cross_matched(tmp_path):
     detect_blobs_range(pr, 0, 0, workers=1).do(pr)
     seeds = json.loads((tmp_path / "seeds.json").read_text())
     process_to_init3d(pr, seeds, read_brim_svg(tmp_path / "brim.svg"), log=lambda s: None)
-    uv, vis, M = truth["uv"][0], truth["visible"][0], truth["face_xyz"].shape[1]
+    uv, vis = truth["uv"][0], truth["visible"][0]
     owner = []
     for s in range(4):
         rec = pr.detections[s].frame(0)

@@ -31,3 +31,38 @@ def open_sample_take(folder, markers: int, start: int = 0, end: int = 0):
     doc.run(import_xcp(project, folder / "calibration.xcp", None))
     doc.run(detect_blobs_range(project, start, end))
     return project, doc, truth
+
+
+def initialise_from_seeds(folder, project, doc) -> None:
+    """The first half of ``carapost process`` on an opened sample take: its ``seeds.json`` clicks, Solve
+    Calibration Brim with its ``brim.svg``, Bundle Current Frame and Initialize 3D (one undo step each)."""
+    import json
+
+    from carapost.core.pipeline import process_to_init3d
+    from carapost.io.brim_svg import read_brim_svg
+
+    folder = Path(folder)
+    seeds = json.loads((folder / "seeds.json").read_text())
+    process_to_init3d(project, seeds, read_brim_svg(folder / "brim.svg"), log=lambda s: None, stack=doc.stack)
+
+
+def faint_by_camera(markers: int, seed: int) -> list[set]:
+    """Per camera, the labels of the sample take's markers that are faint on frame 0.
+
+    Faint: in view, but the paint barely changes the image (black paint on a dense
+    black brow; :data:`carapost.core.blobs.synth.FAINT`).  Renders frame 0 again.
+    """
+    from carapost.core.blobs.synth import sample_frames
+
+    return [set(f.faint_names or ()) for f in sample_frames(False, seed=seed, frames=1, markers=markers)]
+
+
+def seen(visible: np.ndarray, labels, faint: list[set]) -> np.ndarray:
+    """``visible`` (``(..., cameras, markers)`` bool) less each camera's faint markers (a copy)."""
+    out = np.asarray(visible).astype(bool).copy()
+    labels = [str(v) for v in labels]
+    for s, names in enumerate(faint):
+        for m, lab in enumerate(labels):
+            if lab in names:
+                out[..., s, m] = False
+    return out
