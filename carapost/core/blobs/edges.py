@@ -248,6 +248,13 @@ def _conic_fit(u, v, w, scale, res):
 
     Returns ``(x0, y0, ok)`` in the scaled units; fills ``res``.
     """
+    x0, y0, ok, _z = _conic_solve(u, v, w, scale, res)
+    return x0, y0, ok
+
+
+@njit(**JIT)
+def _conic_solve(u, v, w, scale, res):
+    """:func:`_conic_fit` that also returns the conic's coefficients ``(A, B, C, D, E, F)``."""
     S = np.zeros((6, 6))
     m = np.empty(6)
     for k in range(len(u)):
@@ -267,7 +274,25 @@ def _conic_fit(u, v, w, scale, res):
         gu = 2.0 * A * u[k] + B * v[k] + D
         gv = B * u[k] + 2.0 * C * v[k] + E
         res[k] = abs(alg) / max(math.hypot(gu, gv), 1e-12) * scale
-    return x0, y0, det > 0
+    return x0, y0, det > 0, z
+
+
+@njit(**JIT)
+def _conic_axes(z, x0, y0):
+    """Semi-axes ``(a, b)`` and angle (radians, of ``a``) of the ellipse conic ``z`` centred at ``(x0, y0)``.
+
+    ``(0, 0, 0)`` when ``z`` is not a real ellipse.
+    """
+    A, B, C, D, E, F = z[0], z[1], z[2], z[3], z[4], z[5]
+    if A + C < 0.0:                 # the eigenvector's sign is arbitrary
+        A, B, C, D, E, F = -A, -B, -C, -D, -E, -F
+    # The conic's value at its centre; the quadratic form's eigenvalues give the axes.
+    f0 = A * x0 * x0 + B * x0 * y0 + C * y0 * y0 + D * x0 + E * y0 + F
+    mean, half = 0.5 * (A + C), math.hypot(0.5 * (A - C), 0.5 * B)
+    l1, l2 = mean - half, mean + half
+    if l1 * l2 <= 0.0 or f0 * l1 >= 0.0:
+        return 0.0, 0.0, 0.0
+    return math.sqrt(-f0 / l1), math.sqrt(-f0 / l2), 0.5 * math.atan2(B, A - C) + 0.5 * math.pi
 
 
 @njit(**JIT)
@@ -363,3 +388,63 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
     if n:
         _refine(np.ascontiguousarray(bright), *args, ox, oy, share)
     return ox, oy, share > 0
+
+
+@njit(**JIT)
+def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, out):
+    buf = np.empty((7, RAYS))
+    for i in range(len(sx)):
+        r0 = max(sr[i], 1.0)
+        out[i, :] = 0.0
+        if fmaj[i] > 0.0:
+            # The measured blob has a clean edge of its own: it is what the candidate led to.
+            a, b = max(fmaj[i] / 2.0, 0.5), max(fmin[i] / 2.0, 0.5)
+            if _fit_edge(img, fx[i], fy[i], a, b, math.radians(fang[i]), buf)[2]:
+                continue
+        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf)
+        if not clean:
+            continue
+        # The conic again on the points the last round kept, for its axes as well as its centre.
+        x0, y0, ok, z = _conic_solve(buf[3], buf[4], buf[6], r0, buf[5])
+        a, b, th = _conic_axes(z, x0, y0)
+        if ok and b > 0.0:
+            out[i, 0], out[i, 1] = sx[i] + x0 * r0, sy[i] + y0 * r0
+            out[i, 2], out[i, 3], out[i, 4], out[i, 5] = 2.0 * a * r0, 2.0 * b * r0, math.degrees(th), 1.0
+
+
+def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None):
+    """Ellipses of dots found from their painted edge alone, around candidate centres.
+
+    For a candidate whose intensity measurement was drawn off to a larger dark
+    region it touches (a nose tip's dot on the shadow under the nose, an
+    edge-on dot beside a brow), the dot's own outline is still the innermost
+    clear edge around the candidate: step 5's rays from a circle of the
+    candidate's radius, and the conic through their edge points.
+
+    Parameters
+    ----------
+    bright : numpy.ndarray
+        Grey ``uint8`` image, blobs brighter than their surround.
+    x, y, radius : array_like
+        Candidates' centres and radii, px.
+    fits : tuple of array_like, optional
+        ``(x, y, major, minor, angle)`` the intensity measurement found from
+        each candidate: where that ellipse's own edge is clean, it is kept
+        (the row is zeros).
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, 6)
+        ``x, y, major, minor, angle, clean`` per candidate (full axes, px; angle
+        of the major axis, degrees); ``clean`` is 1 where the edge made a clean
+        ellipse, else the row is zeros.
+    """
+    args = [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in (x, y, radius)]
+    n = len(args[0])
+    if fits is None:
+        fits = (np.zeros(n),) * 5
+    args += [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in fits]
+    out = np.zeros((n, 6))
+    if len(out):
+        _from_candidates(np.ascontiguousarray(bright), *args, out)
+    return out

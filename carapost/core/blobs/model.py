@@ -7,7 +7,8 @@ are measured.  Stage 2 scores measured blobs from what the measurement reveals
 has sharp edges, nostrils and shading do not — background residual and slope,
 contrast-to-noise, size, elongation, depth — the contrast as a share of the skin's
 light: black paint takes ~90 % of it, a mole or a pore a third — and the uniformity of
-the blob's core — a pupil has glints in it) together with the stage-1 logit.  The
+the blob's core — a pupil has glints in it — and whether the ellipse came from the candidate's own
+edge, its measurement having been drawn off it) together with the stage-1 logit.  The
 stage-2 probability is the detection's score and what the Black/White
 Threshold applies to.
 
@@ -29,7 +30,7 @@ from .features import FEATURE_NAMES
 RESOURCE_DIR = Path(__file__).resolve().parents[3] / "resources"
 #: Features of a measured blob seen by stage 2 (after the stage-1 logit; see :mod:`.centre`).
 FIT_FEATURE_NAMES = ("s1_logit", "log_cnr", "log_major", "axis_ratio", "line_rms", "log_sharpness",
-                     "border_std", "slope", "fill", "edge_share", "moved", "depth", "core_std")
+                     "border_std", "slope", "fill", "edge_share", "moved", "depth", "core_std", "from_edge")
 #: Stage-1 probability below which a candidate is not measured at all.
 STAGE1_GATE = 0.15
 
