@@ -12,8 +12,8 @@ import threading
 import cv2
 import numpy as np
 
-from carapost.core.blobs.edges import (COARSE, INNER, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS, RAYS, REACH, STEP,
-                                       TRUST, WEAK)
+from carapost.core.blobs.edges import (ARCS, COARSE, INLIER, INNER, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS, RAYS,
+                                       REACH, STEP, TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
 _PHI = np.linspace(0.0, 2.0 * np.pi, RAYS, endpoint=False)
@@ -123,6 +123,35 @@ def _fit_edges(gx, gy, x, y, a, b, th):
     dx, dy = x0 * scale, y0 * scale
     n = w.sum(axis=1)
     clean = ok & (n >= MIN_RAYS * RAYS) & (spread < MAX_SCATTER) & (np.hypot(dx, dy) < MAX_MOVE * b)
+    redo = np.flatnonzero(~clean)
+    if len(redo) and ARCS > 0:
+        out = _fit_arcs(u[redo], v[redo], good[redo], scale[redo], b[redo])
+        for arr, new in zip((dx, dy, clean, spread, n), out):
+            arr[redo] = new
+    return dx, dy, clean, spread, n
+
+
+def _fit_arcs(u, v, good, scale, b):
+    """The best arc's ellipse of each blob (``edges._fit_arcs``), batched."""
+    span = int(np.ceil(MIN_RAYS * RAYS))
+    k = np.arange(RAYS)
+    agree = np.full((ARCS, len(u)), -1.0)
+    for j in range(ARCS):
+        s0 = (j * RAYS) // ARCS
+        w = good & (((k - s0) % RAYS) < span)
+        _x0, _y0, ok, res = _conic_centres(u, v, w.astype(float), scale)
+        agree[j] = np.where(ok, (good & (np.abs(res) < INLIER)).sum(axis=1), -1.0)
+    # The first arc with the most agreeing points, as the kernel's strict ``>`` picks.
+    best = np.argmax(agree, axis=0)
+    s0 = (best * RAYS) // ARCS
+    w = good & (((k[None, :] - s0[:, None]) % RAYS) < span)
+    for _ in range(3):
+        x0, y0, ok, res = _conic_centres(u, v, w.astype(float), scale)
+        w = good & (np.abs(res) < INLIER)
+    n = w.sum(axis=1).astype(float)
+    spread = 1.4826 * _median_of_used(np.abs(res), w) + 0.02
+    dx, dy = x0 * scale, y0 * scale
+    clean = ok & (agree.max(axis=0) >= 0) & (n >= MIN_RAYS * RAYS) & (spread < MAX_SCATTER) & (np.hypot(dx, dy) < MAX_MOVE * b)
     return dx, dy, clean, spread, n
 
 

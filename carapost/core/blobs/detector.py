@@ -345,9 +345,13 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     idx = np.flatnonzero(ok)
     keep = idx[_dedupe(fitted.x[idx], fitted.y[idx], fitted.minor[idx], prob[idx])]
     rec = np.zeros(len(keep), DET_DTYPE)
-    rec["x"], rec["y"], _ = refine_centres(bright, fitted.x[keep], fitted.y[keep], fitted.major[keep],
-                                           fitted.minor[keep], fitted.angle[keep],
-                                           tuple(v[keep] for v in fitted.start))
+    rec["x"], rec["y"] = fitted.x[keep], fitted.y[keep]
+    # An ellipse found from its candidate's edge already has the edge's centre.
+    again = keep if fitted.from_edge is None else keep[~fitted.from_edge[keep]]
+    at = np.searchsorted(keep, again)
+    rec["x"][at], rec["y"][at], _ = refine_centres(bright, fitted.x[again], fitted.y[again], fitted.major[again],
+                                                   fitted.minor[again], fitted.angle[again],
+                                                   tuple(v[again] for v in fitted.start))
     rec["major"], rec["minor"], rec["angle"] = fitted.major[keep], fitted.minor[keep], fitted.angle[keep]
     rec["score"] = prob[keep]
     rec["color"] = COLOR_WHITE if white else COLOR_BLACK

@@ -60,6 +60,10 @@ TRUST = 8.0
 MERGED = 1.8
 #: Robust fitting rounds.
 ROUNDS = 3
+#: Arcs tried when the whole edge is not a clean ellipse (0: none), and the distance within which an
+#: edge point agrees with an arc's ellipse, px.
+ARCS = 12
+INLIER = 0.35
 
 _SAMPLES = int(round(2 * REACH / STEP)) + 1
 #: The coarse search's step, in samples.
@@ -305,7 +309,7 @@ def _median_of_used(r, used):
 
 
 @njit(**JIT)
-def _fit_edge(img, cx, cy, a, b, th, buf):
+def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False):
     """Steps 5.1-5.3 for one blob from the ellipse ``(cx, cy, a, b, th)``.
 
     Returns ``(dx, dy, clean, spread, n)``: the edge conic's centre less
@@ -329,6 +333,51 @@ def _fit_edge(img, cx, cy, a, b, th, buf):
     n = w.sum()
     dx, dy = x0 * a, y0 * a
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
+    if not clean and arcs and ARCS > 0:
+        return _fit_arcs(u, v, peak, lim, a, b, buf)
+    return dx, dy, clean, spread, n
+
+
+@njit(**JIT)
+def _fit_arcs(u, v, peak, lim, a, b, buf):
+    """Step 5.3 again for an edge that is not a clean ellipse as a whole: the best arc's ellipse.
+
+    Hair, a shadow or a neighbour touching a dot corrupts the rays on one side: a
+    contiguous arc of them.  The conic is fitted to each of ``ARCS`` arcs of
+    ``MIN_RAYS`` of the rays; the one that the most edge points agree with (within
+    ``INLIER`` px) wins and is fitted again to those points, twice.  Returns what
+    :func:`_fit_edge` does.
+    """
+    res, w = buf[5], buf[6]
+    span = int(math.ceil(MIN_RAYS * RAYS))
+    best, best_s = -1.0, 0
+    for j in range(ARCS):
+        s0 = (j * RAYS) // ARCS
+        for k in range(RAYS):
+            w[k] = 1.0 if ((k - s0) % RAYS) < span and peak[k] > lim and peak[k] > 0.0 else 0.0
+        x0, y0, ok = _conic_fit(u, v, w, a, res)
+        if not ok:
+            continue
+        agree = 0.0
+        for k in range(RAYS):
+            if peak[k] > lim and peak[k] > 0.0 and res[k] < INLIER:
+                agree += 1.0
+        if agree > best:
+            best, best_s = agree, s0
+    if best < 0:
+        return 0.0, 0.0, False, np.inf, 0.0
+    for k in range(RAYS):
+        w[k] = 1.0 if ((k - best_s) % RAYS) < span and peak[k] > lim and peak[k] > 0.0 else 0.0
+    x0 = y0 = 0.0
+    ok = False
+    for _ in range(3):
+        x0, y0, ok = _conic_fit(u, v, w, a, res)
+        for k in range(RAYS):
+            w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 and res[k] < INLIER else 0.0
+    n = w.sum()
+    spread = 1.4826 * _median_of_used(res, w > 0.0) + 0.02
+    dx, dy = x0 * a, y0 * a
+    clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
     return dx, dy, clean, spread, n
 
 
@@ -338,7 +387,7 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share):
     for i in range(len(x)):
         a, b = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5)
         ox[i], oy[i], share[i] = x[i], y[i], 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf)
+        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, True)
         if clean:
             # The edge points' scatter over the square root of their number: the standard error of the
             # fit's centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
@@ -351,7 +400,7 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share):
             # Measured much larger than its candidate and no clean edge: the dot was measured together
             # with a darker region it touches.  Its own edge, from the candidate (inside the dot).
             r0 = max(sr[i], 1.0)
-            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf)
+            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, True)
             if clean:
                 ox[i], oy[i], share[i] = sx[i] + dx, sy[i] + dy, 1.0
 
@@ -401,7 +450,7 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, out):
             a, b = max(fmaj[i] / 2.0, 0.5), max(fmin[i] / 2.0, 0.5)
             if _fit_edge(img, fx[i], fy[i], a, b, math.radians(fang[i]), buf)[2]:
                 continue
-        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf)
+        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, True)
         if not clean:
             continue
         # The conic again on the points the last round kept, for its axes as well as its centre.
