@@ -31,6 +31,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", default="1280x720", help="image size WxH (default 1280x720)")
     p.add_argument("--take", default="Sample", help="take name: <take>_<channel>.pico (default Sample)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: one per CPU, at most 4)")
+    p.add_argument("--seeds-frame", type=int, default=0, metavar="N",
+                   help="frame the seeds.json clicks are made on; negative counts from the end, -1 the last "
+                        "frame (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     g = p.add_argument_group("a second take of the same face (for Initialize from ROM)")
     g.add_argument("--motion-seed", type=int, default=None,
@@ -63,7 +66,8 @@ def run(args) -> int:
 
     info = write_sample(args.out_dir, markers=args.markers, frames=args.frames, seed=args.seed, white=args.white,
                         width=w, height=h, take=args.take, workers=args.workers, progress=progress,
-                        motion_seed=args.motion_seed, rig_move=rig_move, camera_move=camera_move)
+                        motion_seed=args.motion_seed, rig_move=rig_move, camera_move=camera_move,
+                        seeds_frame=args.seeds_frame)
     if not args.quiet and sys.stderr.isatty():
         print(file=sys.stderr)
     print(f"sample take: {info['frames']} frames, {info['markers']} face markers, {info['brim_markers']} brim "

@@ -22,7 +22,7 @@ from .markers import SURF_FACE
 from .rig import BRIM_MARKERS, BRIM_RADIUS, CHANNEL_NAMES, brim_svg
 from .scene import Scene, build_scene, calibration_cameras, frame_geometry, rng_for, true_cameras
 
-__all__ = ["write_sample", "render_channel", "choose_seeds", "SAMPLE_FILES"]
+__all__ = ["write_sample", "render_channel", "choose_seeds", "seeds_of_take", "SAMPLE_FILES"]
 
 log = logging.getLogger("carapost")
 
@@ -316,7 +316,8 @@ def _write_text(path: Path, text: str) -> None:
 def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 0, white: bool = False,
                  width: int = 1280, height: int = 720, take: str = "Sample", lossless: bool = True,
                  progress=None, workers: int | None = None, noise: float = 2.0, blur: float = 0.8,
-                 motion_seed: int | None = None, rig_move=(0.0, 0.0), camera_move=None) -> dict:
+                 motion_seed: int | None = None, rig_move=(0.0, 0.0), camera_move=None,
+                 seeds_frame: int = 0) -> dict:
     """Render a synthetic four-camera take with its ground truth into ``out_dir``.
 
     Parameters
@@ -352,6 +353,9 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
     camera_move : (int, float, float), optional
         ``(channel, mm, degrees)``: one camera moved relative to the rest of the rig and the brim
         (``calibration.xcp`` and ``truth_cameras.xcp`` show it where it is).
+    seeds_frame : int
+        The frame ``seeds.json``'s clicks are made on (negative: from the end, -1 the last
+        frame), for starting Initialize 3D and tracking elsewhere than on frame 0.
 
     Returns
     -------
@@ -376,6 +380,7 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
         raise CaraError(f"--markers must be between 1 and 400, not {markers}")
     if int(frames) < 1:
         raise CaraError(f"--frames must be at least 1, not {frames}")
+    seeds_frame = _frame_index(seeds_frame, int(frames))
     try:
         scene = build_scene(markers=markers, frames=frames, seed=seed, white=white, width=width, height=height,
                             noise=noise, blur=blur, motion_seed=motion_seed, rig_move=rig_move,
@@ -399,7 +404,7 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
     for ch in chans[1:]:
         ch.pop("points")
     truth = {k: np.stack([ch[k] for ch in chans], axis=1) for k in chans[0]}     # (F, 4, P, ...)
-    files.update(_write_truth(scene, truth, points, out))
+    files.update(_write_truth(scene, truth, points, out, seeds_frame))
     files["pico"] = [str(p) for p in paths]
     nf = len(scene.markers)
     files.update(frames=scene.frames, markers=nf, brim_markers=scene.n_brim, seed=int(seed),
@@ -431,14 +436,14 @@ def _write_scene_files(scene: Scene, out: Path) -> dict:
     return files
 
 
-def _write_truth(scene: Scene, truth: dict, points: np.ndarray, out: Path) -> dict:
-    """The files made from the rendering's truth: seeds, C3D, npz."""
+def _write_truth(scene: Scene, truth: dict, points: np.ndarray, out: Path, seeds_frame: int = 0) -> dict:
+    """The files made from the rendering's truth: seeds (clicked on ``seeds_frame``), C3D, npz."""
     F, nf, nb = scene.frames, len(scene.markers), scene.n_brim
     labels = list(scene.markers.labels)
     brim_labels = [f"Brim_{i}" for i in range(nb)]
     files = {}
     p = out / "seeds.json"
-    seeds = choose_seeds(scene, truth)
+    seeds = choose_seeds(scene, truth, frame=seeds_frame)
     _write_text(p, _seeds_json(seeds))
     files["seeds"] = str(p)
     # 3D truth, world (brim) frame, mm.
@@ -468,6 +473,54 @@ def _write_truth(scene: Scene, truth: dict, points: np.ndarray, out: Path) -> di
     os.replace(tmp, p)
     files["truth_npz"] = str(p)
     return files
+
+
+def _frame_index(frame: int, frames: int) -> int:
+    """``frame`` of a take of ``frames`` frames (negative: from the end); CaraError outside it."""
+    f = int(frame) + (int(frames) if int(frame) < 0 else 0)
+    if not 0 <= f < frames:
+        raise CaraError(f"--seeds-frame {frame} is outside the take's {frames} frames")
+    return f
+
+
+def seeds_of_take(folder, frame: int) -> dict:
+    """The ``seeds.json`` clicks of an already written sample take, made on another ``frame``.
+
+    The scene is drawn again from the parameters ``truth.npz`` keeps (drawing it is
+    cheap; only rendering is not), so a take rendered once can be initialised on any
+    frame, e.g. its last one for Track Backwards.  The same as writing the take with
+    ``seeds_frame=frame``.
+
+    Parameters
+    ----------
+    folder : path-like
+        A folder :func:`write_sample` wrote.
+    frame : int
+        Negative: from the end (-1 the last frame).
+
+    Returns
+    -------
+    dict
+        As ``seeds.json`` (CONTRACT section 3).
+
+    Raises
+    ------
+    CaraError
+        If the folder has no readable ``truth.npz`` or ``frame`` is outside the take.
+    """
+    path = Path(folder) / "truth.npz"
+    try:
+        t = dict(np.load(path))
+    except (OSError, ValueError) as e:
+        raise CaraError(f"cannot read the sample's truth: {e}", path) from None
+    frames = int(t["face_xyz"].shape[0])
+    size = [int(v) for v in t["size"]]
+    scene = build_scene(markers=len(t["labels"]), frames=frames, seed=int(t["seed"]), white=bool(t["white"]),
+                        width=size[0], height=size[1],
+                        motion_seed=int(t["motion_seed"]) if "motion_seed" in t else None,
+                        rig_move=tuple(t["rig_move"]) if "rig_move" in t else (0.0, 0.0),
+                        camera_move=tuple(t["camera_move"]) if "camera_move" in t else None)
+    return choose_seeds(scene, t, frame=_frame_index(frame, frames))
 
 
 def _second_take_keys(scene: Scene) -> dict:

@@ -33,16 +33,24 @@ def open_sample_take(folder, markers: int, start: int = 0, end: int = 0):
     return project, doc, truth
 
 
-def initialise_from_seeds(folder, project, doc) -> None:
+def initialise_from_seeds(folder, project, doc, frame: int | None = None) -> None:
     """The first half of ``carapost process`` on an opened sample take: its ``seeds.json`` clicks, Solve
-    Calibration Brim with its ``brim.svg``, Bundle Current Frame and Initialize 3D (one undo step each)."""
+    Calibration Brim with its ``brim.svg``, Bundle Current Frame and Initialize 3D (one undo step each).
+
+    ``frame``: initialise on this frame instead (negative: from the end), with the clicks a person
+    makes there (:func:`carapost.sample.take.seeds_of_take`); default the frame of ``seeds.json``.
+    """
     import json
 
     from carapost.core.pipeline import process_to_init3d
     from carapost.io.brim_svg import read_brim_svg
 
+    from .take import seeds_of_take
+
     folder = Path(folder)
     seeds = json.loads((folder / "seeds.json").read_text())
+    if frame is not None:
+        seeds = seeds_of_take(folder, frame)
     process_to_init3d(project, seeds, read_brim_svg(folder / "brim.svg"), log=lambda s: None, stack=doc.stack)
 
 

@@ -281,7 +281,10 @@ class FrameTracker:
         # 3. Pass 1: unambiguous matches within the Face Point Tracking Distance.
         radius = np.full(N, float(p.face_point_tracking_distance))
         have = np.all(np.isfinite(Xp), axis=1)
-        slots = np.repeat(have[:, None], S, axis=1)
+        # Only views that go on from the previous frame: a view coming back (the marker was hidden in
+        # that camera) waits for pass 2, so that it cannot take, by a nearer prediction, the blob of a
+        # neighbour the camera kept seeing (a jaw dot turning out of view projects onto the next one).
+        slots = have[:, None] & np.all(np.isfinite(self.uv_prev), axis=2)
         Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2)
         if len(Pi):
             key = Pi * S + Si
@@ -371,7 +374,10 @@ class FrameTracker:
         valid = src != SRC_NONE
         # 6. Triangulate, remove bad 2D projections, refine the cameras (brim fixed), triangulate again.
         X, err = self._triangulate_clean(rig, uv_c, valid, src, det, el)
-        self._check_patches(rig, X, err, uv_c, src)
+        # Where the neighbours cannot predict a point (most of them lost, as on a grazing chin), its own
+        # motion is the check: a point tracked on the previous frame does not jump millimetres.
+        motion = np.where(tracked[:, None], Xp, np.nan)
+        self._check_patches(rig, X, err, uv_c, src, motion)
         valid = src != SRC_NONE
         multi = valid.sum(1) >= 2
         if np.count_nonzero(multi) >= 3:
@@ -387,6 +393,9 @@ class FrameTracker:
         err = reprojection(rig, X, uv_c, valid)
         if p.remove_bad_3d_points and np.any(measured):
             back = reacquired | (lost & (valid.sum(1) >= 3))
+            # (Two views of a wide pair meet whatever the blobs when one lies near the other's epipolar
+            # line: a chin dot's view took the next chin dot's blob, 20 px away, and passed 20 mm off.)
+            pred = np.where(np.isfinite(pred), pred, motion)
             X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back, pred)
             valid = src != SRC_NONE
         # 8. Single-sensor tracking of points seen by one sensor only.
@@ -511,7 +520,8 @@ class FrameTracker:
         """Triangulate; with Remove Bad 2D Projections drop the worst view above the limit until all fit.
 
         ``pred`` (N, 3): the neighbours' prediction (NaN none), which decides between views above the
-        held-out limit.
+        held-out limit.  The held-out test runs again on a point that still has 3+ views after losing
+        one, as long as each further drop brings it nearer that prediction.
         """
         X = triangulate(rig, uv_c, valid)
         err = reprojection(rig, X, uv_c, valid)
@@ -531,13 +541,15 @@ class FrameTracker:
             err[bad] = reprojection(rig, X[bad], uv_c[bad], valid[bad])
         # A wrong view of a 3+-view point shares its error with the others; held out, it shows in full.
         rows = np.flatnonzero(valid.sum(1) >= 3)
-        if len(rows):
+        limit, again = None, False
+        while len(rows):
             # Hold out each view in turn: the wrong one is the view the others agree least with
             # (not the one with the largest residual, which a wrong view may push onto a good one).
             held, Xs = held_out_errors(rig, uv_c[rows], valid[rows], X[rows])
             worst = np.argmax(held, axis=1)
             e = held[np.arange(len(rows)), worst]
-            limit = held_out_limit(e, self.p.max_allowed_2d_projection_error)
+            if limit is None:
+                limit = held_out_limit(e, self.p.max_allowed_2d_projection_error)
             # Two close cameras left alone fix the depth badly (mm per pixel of a biased detection), so
             # the good third view can look the worst; of the views above the limit, drop the one whose
             # removal leaves the point nearest the neighbours' prediction.
@@ -547,20 +559,32 @@ class FrameTracker:
             worst = np.where(judged, np.argmin(near, axis=1), worst)
             Xo = Xs[np.arange(len(rows)), worst]
             bad = e > limit
-            if np.any(bad):
-                b, s = rows[bad], worst[bad]
-                valid[b, s] = False
-                src[b, s] = SRC_NONE
-                uv_c[b, s] = np.nan
-                X[b] = Xo[bad]
-                err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
+            if again:
+                # Another round only where it brings the point nearer its neighbours: two close cameras
+                # left alone agree with each other at any depth, and a good pair must not lose its mate.
+                bad &= judged & (near[np.arange(len(rows)), worst] < np.linalg.norm(X[rows] - pred[rows], axis=1))
+            if not np.any(bad):
+                break
+            b, s = rows[bad], worst[bad]
+            valid[b, s] = False
+            src[b, s] = SRC_NONE
+            uv_c[b, s] = np.nan
+            X[b] = Xo[bad]
+            err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
+            # A point may hold two wrong views (a drifting patch and another marker's blob): the views
+            # left are judged again, against the same limit (the frame's spread of good views).
+            rows = b[valid[b].sum(1) >= 3]
+            again = True
         return X, err
 
-    def _check_patches(self, rig, X, err, uv_c, src):
+    def _check_patches(self, rig, X, err, uv_c, src, motion=None):
         """Drop patch views that disagree with the point's blob views or, lacking two, its neighbours.
 
         Patches are the weaker evidence: blob views decide where the point is, and
-        a patch may only add to it.  Updates ``X``, ``err``, ``uv_c`` and ``src`` in place.
+        a patch may only add to it.  ``motion`` (N, 3): the points' constant-velocity
+        prediction (NaN for points not tracked on the previous frame; None: none), the
+        check where the neighbours cannot predict; with neither, a point's patch views go.
+        Updates ``X``, ``err``, ``uv_c`` and ``src`` in place.
         """
         patch = src == SRC_PATCH
         rows = np.flatnonzero(patch.any(1))
@@ -578,10 +602,15 @@ class FrameTracker:
         few = ~two & measured[rows]
         if np.any(few):
             r = rows[few]
-            dev = np.linalg.norm(X[r] - self._predict(X, measured & ~patch.any(1), r), axis=1)
-            # Patches alone, with nothing to check them against, are not evidence enough (two patches
-            # over skin near a turned-away chin dot meet anywhere along their rays).
-            unchecked = np.isnan(dev) & ~blob[few].any(1)
+            ref = self._predict(X, measured & ~patch.any(1), r)
+            if motion is not None:
+                ref = np.where(np.isfinite(ref), ref, motion[r])
+            dev = np.linalg.norm(X[r] - ref, axis=1)
+            # Patches with nothing to check them against (neither neighbours nor the point's own motion)
+            # are not evidence enough: two patches over skin near a turned-away chin dot meet anywhere
+            # along their rays, and one patch beside one blob is as free (a chin patch slid 20 px onto
+            # the next dot, which lay near the blob's epipolar line).
+            unchecked = np.isnan(dev)
             drop[few] = patch[r] & ((np.nan_to_num(dev, nan=0.0) > PATCH_3D_MM) | unchecked)[:, None]
         if not np.any(drop):
             return

@@ -1,0 +1,163 @@
+"""Tracking must not take another marker's blob (issue 7): the swaps of the dense rendered take.
+
+Each test rebuilds, on one frame of a synthetic take with ground truth, a situation that made a
+point of ``carapost sample --markers 156 --seed 0`` (300 frames) jump onto the next marker's dot
+while the jaw was open; each fails without the rule it is named after.
+"""
+import numpy as np
+import pytest
+
+from carapost.core.detections import make_detections
+from carapost.core.points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE
+from carapost.core.tracking.engine import FrameTracker
+from carapost.core.tracking.geometry import RigState, reprojection, triangulate
+from carapost.core.tracking.params import TrackingParams
+import test_tracking
+
+#: 35 markers of slow head motion, initialised on frame 0 (its frame 0 gives the rig and the face).
+quiet = test_tracking.quiet
+
+
+def tracker_after(sc, seen=None, X=None):
+    """A tracker whose previous frame saw ``X`` (default frame 0's true face) in the slots ``seen``."""
+    rig = RigState(sc.project.rig.cameras_at(0))
+    X = sc.face[0].astype(float).copy() if X is None else X
+    uv = rig.project(X)
+    if seen is None:
+        seen = np.all(np.isfinite(uv), axis=2)
+    raw = np.stack([rig.cameras[s].distort(uv[:, s]) for s in range(rig.S)], axis=1)
+    uv0 = np.where(seen[..., None], raw, np.nan)
+    size0 = np.where(seen[..., None], np.full(raw.shape, 8.0), np.nan)
+    return FrameTracker(rig, X, uv0, size0, np.zeros((0, 3)), TrackingParams()), rig, X, raw
+
+
+def recs_from(raw, present):
+    """Detections per sensor: ``raw`` (N, S, 2) where ``present`` (N, S); returns (recs, index (N, S))."""
+    recs, index = [], np.full(present.shape, -1)
+    for s in range(raw.shape[1]):
+        rows = np.flatnonzero(present[:, s] & np.all(np.isfinite(raw[:, s]), axis=1))
+        index[rows, s] = np.arange(len(rows))
+        recs.append(make_detections(raw[rows, s, 0], raw[rows, s, 1]))
+    return recs, index
+
+
+def nearest_pair(rig, X, s):
+    """Two markers whose images in camera ``s`` lie closest together (m, n)."""
+    uv = rig.project(X)[:, s]
+    d = np.linalg.norm(uv[:, None] - uv[None], axis=2)
+    d[np.eye(len(X), dtype=bool) | ~np.isfinite(d)] = np.inf
+    m, n = np.unravel_index(np.argmin(d), d.shape)
+    return int(m), int(n)
+
+
+def test_a_view_coming_back_does_not_take_the_blob_a_neighbour_keeps(quiet):
+    """Jaw_R_4, frame 35: hidden in camera 0, then its prediction there fell 2 px from Jaw_R_1's blob.
+
+    Matched first by distance, the coming-back view won the blob from the neighbour that had been
+    seeing it all along, and the point went 4.8 mm off.  A coming-back view now waits for pass 2,
+    after the views that go on have taken their blobs.
+    """
+    s = 0
+    rig = RigState(quiet.project.rig.cameras_at(0))
+    X = quiet.face[0].astype(float).copy()
+    m, n = nearest_pair(rig, X, s)
+    # Seen edge on, m's image in camera s is 1.6 px from n's (m moved along that camera's ray).
+    uv = rig.project(X)[:, s]
+    target = uv[n] + 1.6 * (uv[m] - uv[n]) / np.linalg.norm(uv[m] - uv[n])
+    o, d = rig.rays(np.array([s]), target[None])
+    X[m] = o[0] + np.dot(X[m] - o[0], d[0]) * d[0]
+    T, rig, X, raw = tracker_after(quiet, X=X)
+    # m's dot turned out of camera s on the previous frame; n's blob there now lies nearer m's
+    # prediction than n's own (a grazing dot's centroid moves off its centre).
+    T.uv_prev[m, s] = np.nan
+    present = np.ones(raw.shape[:2], bool)
+    present[m, s] = False
+    raw2 = raw.copy()
+    raw2[n, s] = raw[n, s] + 0.55 * (raw[m, s] - raw[n, s])
+    assert np.linalg.norm(raw2[n, s] - raw[m, s]) < np.linalg.norm(raw2[n, s] - raw[n, s]) < 1.0
+    recs, index = recs_from(raw2, present)
+    r = T.step(1, recs)
+    assert r.det[m, s] != index[n, s]
+    assert r.det[n, s] == index[n, s]
+    assert np.linalg.norm(r.X[m] - X[m]) < 0.5
+
+
+@pytest.mark.parametrize("off_mm,kept", [(0.0, True), (7.0, False)])
+def test_a_point_without_neighbours_is_checked_against_its_own_motion(quiet, off_mm, kept):
+    """Chin_R_11, frame 99: two cameras across the face met on the next chin dot's blob, 20 mm off.
+
+    Its neighbours were lost (grazing chin), so Remove Bad 3D Points had no prediction to hold it
+    to, and a wide pair agrees with itself wherever its blobs lie near each other's epipolar lines.
+    A point tracked on the previous frame is now held to its own constant-velocity prediction there.
+    """
+    T, rig, X, raw = tracker_after(quiet)
+    m = 3
+    nb = T.nb[m]
+    wide = [1, 3]
+    # The blobs of a point 7 mm off, seen by a wide pair only; its neighbours seen by nobody.
+    u = np.cross(X[m] - rig.C[1], X[m] - rig.C[3])
+    Xb = X[m] + off_mm * u / np.linalg.norm(u)
+    moved = rig.project(Xb[None])[0]
+    raw2 = raw.copy()
+    for s in wide:
+        raw2[m, s] = rig.cameras[s].distort(moved[s])
+    assert np.all(np.linalg.norm(raw2[m, wide] - raw[m, wide], axis=1) < TrackingParams().face_point_tracking_distance)
+    present = np.ones(raw.shape[:2], bool)
+    present[nb] = False
+    present[m] = False
+    present[m, wide] = True
+    recs, _ = recs_from(raw2, present)
+    r = T.step(1, recs)
+    if kept:
+        assert r.status[m] != ST_NONE and np.linalg.norm(r.X[m] - X[m]) < 0.1
+    else:
+        assert r.status[m] == ST_NONE, np.linalg.norm(r.X[m] - X[m])
+
+
+def test_a_point_with_two_wrong_views_loses_both(quiet):
+    """Jaw_R_4, frame 246: a drifting patch and the next dot's blob beside its close pair.
+
+    The held-out test dropped one wrong view; the other stayed and put the point 3.2 mm off (its
+    held-out error, 5 px, was far above the frame's limit).  The views left are now judged again.
+    """
+    T, rig, X, raw = tracker_after(quiet)
+    m = 0
+    assert np.all(np.isfinite(raw[m]))
+    raw2 = raw.copy()
+    raw2[m, 0] += (4.0, 0.0)                       # the patch
+    raw2[m, 1] += (0.0, 2.5)                       # the next dot's blob
+    recs, index = recs_from(raw2, np.ones(raw.shape[:2], bool))
+    r = T.step(1, recs)
+    assert list(r.det[m, :2]) == [-1, -1]
+    assert list(r.det[m, 2:]) == list(index[m, 2:])
+    assert np.linalg.norm(r.X[m] - X[m]) < 0.1
+
+
+def test_a_patch_beside_one_blob_needs_something_to_check_it(quiet):
+    """Chin_C_2, frame 206: a patch slid 20 px onto the next chin dot, beside one good blob.
+
+    No neighbour was measured, so nothing checked the patch (only two patches without a blob
+    were dropped), and the point passed 16.7 mm off.  The point's own motion is now the check
+    where the neighbours cannot give one (within the same 2 mm), and with neither the patch goes.
+    """
+    T, rig, X, _ = tracker_after(quiet)
+    m = 5
+    uv = rig.project(X)
+    uv[m, 0] += (6.0, 0.0)                          # the patch on skin or on the next dot
+
+    def run(motion):
+        src = np.full((len(X), rig.S), SRC_DETECTION, np.uint8)
+        src[m] = [SRC_PATCH, SRC_DETECTION, SRC_NONE, SRC_NONE]
+        valid = src != SRC_NONE
+        Xt = triangulate(rig, uv, valid)
+        Xt[np.arange(len(X)) != m] = np.nan          # no neighbour measured: no prediction
+        err = reprojection(rig, Xt, uv, valid)
+        T._check_patches(rig, Xt, err, uv.copy(), src, motion)
+        return src[m, 0]
+
+    here = np.where(np.arange(len(X))[:, None] == m, X, np.nan)      # its motion: it stays where it was
+    assert run(np.full(X.shape, np.nan)) == SRC_NONE                 # lost on the frame before
+    assert run(None) == SRC_NONE
+    assert run(here) == SRC_NONE                                     # 6 px: millimetres off its motion
+    uv[m, 0] -= (6.0, 0.0)
+    assert run(here) == SRC_PATCH                                    # where it moves to: kept
