@@ -18,7 +18,7 @@ the 156-marker ones, depth 16 mm, for the dense set), scored against
   camera-centre error.
 
 Targets (issue 6): >= 97 % initialised, 0 mismatched, RMS <= 0.08 mm, cameras
-<= 0.3 mm.  Run: ``.venv/bin/python benchmarks/bench_init3d.py [--quick]``.
+<= 0.3 mm.  Run: ``.venv/bin/python benchmarks/bench_init3d.py [--quick] [--seeds 0-5 [--markers 35,150]]``.
 """
 from __future__ import annotations
 
@@ -95,9 +95,13 @@ def one(markers: int, seed: int) -> dict:
         return out
 
 
-def run(quick: bool = False) -> list[dict]:
-    """Issue 6's Initialize 3D figures, one row per take (35 and 150 markers, seeds 0-2; quick: 35, seed 0)."""
-    cases = [(35, 0)] if quick else [(m, s) for m in (35, 150) for s in (0, 1, 2)]
+def run(quick: bool = False, cases=None) -> list[dict]:
+    """Issue 6's Initialize 3D figures, one row per take (35 and 150 markers, seeds 0-2; quick: 35, seed 0).
+
+    ``cases``: ``(markers, seed)`` pairs to run instead.
+    """
+    if cases is None:
+        cases = [(35, 0)] if quick else [(m, s) for m in (35, 150) for s in (0, 1, 2)]
     rows = []
     for markers, seed in cases:
         r = one(markers, seed)
@@ -110,6 +114,25 @@ def run(quick: bool = False) -> list[dict]:
     return rows
 
 
+def _numbers(text: str) -> list[int]:
+    """``"0-5"`` or ``"3,4"`` (or both, ``"0-2,5"``) as a list of ints."""
+    out = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b or a) + 1))
+    return out
+
+
 if __name__ == "__main__":
-    for row in run(quick="--quick" in sys.argv):
-        print(json.dumps(row))
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="one take: 35 markers, seed 0")
+    ap.add_argument("--seeds", help="sample seeds to run, e.g. 0-5 or 3,4 (default: 0-2)")
+    ap.add_argument("--markers", default="35,150", help="marker counts with --seeds (default: 35,150)")
+    args = ap.parse_args()
+    chosen = None
+    if args.seeds:
+        chosen = [(m, s) for m in _numbers(args.markers) for s in _numbers(args.seeds)]
+    for row in run(quick=args.quick, cases=chosen):
+        print(json.dumps(row), flush=True)

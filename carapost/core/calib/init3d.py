@@ -8,10 +8,16 @@
    and it must be unambiguous for both detections (the only candidate, or one
    clearly better than the next).
 3. The two caddies' points within Max 3D Distance To Merge are merged
-   (mutual nearest neighbours with disjoint sensors).
-4. Bundle adjustment of cameras and points; then every point takes the
-   unambiguous free detection at its projection in channels where it has none,
-   observations that no longer fit are detached, and the frame is bundled again.
+   (mutual nearest neighbours with disjoint sensors).  Blobs far larger than a
+   marker (mm, at their depth) are left out, and grown points resting on
+   enlarged blobs only are dropped (:mod:`.blob_size`).
+4. Bundle adjustment of cameras and points; then markers seen by one camera of
+   each caddy are matched across the caddies (:mod:`.cross_caddy`), every
+   point takes the unambiguous free detection at its projection in channels
+   where it has none, observations that no longer fit are detached (a view
+   its point's other views disagree with, the caddy with the larger blobs of
+   a point whose caddies disagree: :mod:`.caddy_split`), and the frame is
+   bundled again.
 """
 from __future__ import annotations
 
@@ -23,13 +29,15 @@ from ..commands import CompoundCommand
 from ..edits import AddPoints, SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, FACE, SRC_DETECTION, SRC_NONE, ST_NONE, ST_RECONSTRUCTED
+from .blob_size import blob_sizes_mm, enlarged_pair, gross_views, view_sizes_mm
 from .bundle import bundle_cameras
+from .caddy_split import caddy_split
+from .cross_caddy import grow_across
+from .matching import CLEAR_RATIO, unambiguous
 from .nearest import nearest_with_clearance
 
 #: Dilation (px) of the brim's projected convex hull.
 BRIM_MARGIN_PX = 12.0
-#: A best candidate is "clear" when the next one is this many times worse.
-CLEAR_RATIO = 4.0
 #: Attaching a detection at a point's projection: gate and clearance (px).
 ATTACH_GATE_PX = 2.0
 ATTACH_CLEARANCE_PX = 5.0
@@ -60,26 +68,6 @@ def _brim_region(cam, markers, xy, margin):
         return np.zeros(len(xy), bool)
     hull = cv2.convexHull(uv.astype(np.float32))
     return np.array([cv2.pointPolygonTest(hull, (float(x), float(y)), True) >= -margin for x, y in xy], bool)
-
-
-def _unambiguous(ia, ib, d):
-    """Mask of candidate pairs that are the clear choice of both their detections."""
-    ok = np.ones(len(ia), bool)
-    for key in (ia, ib):
-        order = np.lexsort((d, key))
-        k, dd = key[order], d[order]
-        first = np.r_[True, k[1:] != k[:-1]]
-        start = np.flatnonzero(first)
-        counts = np.diff(np.r_[start, len(k)])
-        best = dd[start]
-        second = np.where(counts > 1, dd[np.minimum(start + 1, len(k) - 1)], np.inf)
-        good = (counts == 1) | (second >= CLEAR_RATIO * np.maximum(best, 0.05))
-        winner = np.zeros(len(k), bool)
-        winner[start[good]] = True
-        m = np.zeros(len(ia), bool)
-        m[order] = winner
-        ok &= m
-    return ok
 
 
 def other_view_support(cams, xy, X, skip, gate=SUPPORT_GATE_PX):
@@ -140,9 +128,10 @@ def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi, support=Non
     good[good] &= (cam_a.depth(X[good]) > 0) & (cam_b.depth(X[good]) > 0)
     ia, ib, d, X = ia[good], ib[good], d[good], X[good]
     supported = np.zeros(len(X), bool)
+    penalty = np.zeros(len(X))
     if support is not None and len(X):
         supported = support(X) > 0
-        d = d + UNSUPPORTED_PENALTY_PX * ~supported
+        penalty = UNSUPPORTED_PENALTY_PX * ~supported
     free_a = np.ones(len(xy_a), bool)
     free_b = np.ones(len(xy_b), bool)
     pts = [np.asarray(seeds_X, float)]
@@ -166,7 +155,7 @@ def grow_pair(cam_a, cam_b, xy_a, xy_b, seeds_X, max_depth, max_epi, support=Non
         # Clear among every free candidate, not only those near the points grown so far: a wrong
         # match that happens to land near them must not win just because the right one lies
         # farther out and is not considered yet.
-        acc = idx[near & _unambiguous(ia[idx], ib[idx], d[idx])]
+        acc = idx[near & unambiguous(ia[idx], ib[idx], d[idx], penalty[idx])]
         if len(acc) == 0:
             break
         for j in acc:
@@ -249,6 +238,7 @@ def initialize_3d(project, frame: int, params: dict | None = None):
     pts = _merge(pts + grown, p["max_3d_distance_to_merge"])
     pts = _repair_unsupported(pts, cams, xy, blocked, project.caddies(),
                               p["max_allowed_symmetric_epipolar_distance"], p["max_allowed_depth"])
+    pts = _drop_merged_blobs(pts, cams, recs, blocked)
     # Bundle, attach in further channels, reject misfits, bundle again.
     brim = [q for q in project.points.values() if q.kind == BRIM and project.brim is not None
             and 0 <= q.brim_index < len(project.brim) and np.any(q.src[frame] != SRC_NONE)]
@@ -262,15 +252,25 @@ def initialize_3d(project, frame: int, params: dict | None = None):
                                                                              np.zeros(len(X), bool)],
                                        np.concatenate([buv, uv]))
         err = err[len(bX):]
-        loo = odd_views_out(cams, uv)
         for k, d in enumerate(pts):
             d["X"] = Xo[len(bX) + k]
-            bad = (np.isfinite(err[k]) & (err[k] > REJECT_PX)) | loo[k]
+        split = caddy_split(cams, uv, view_sizes_mm(cams, recs, pts), project.caddies())
+        # Leave-one-out would judge the kept caddy's views against the pulled pair's.
+        loo = odd_views_out(cams, uv, project.caddies()) & ~split.any(axis=1, keepdims=True)
+        for k, d in enumerate(pts):
+            bad = (np.isfinite(err[k]) & (err[k] > REJECT_PX)) | loo[k] | split[k]
             if d["id"] is None:     # seeds keep what the user attached
                 d["uv"][bad] = np.nan
                 d["det"][bad] = -1
         pts = [d for d in pts if d["id"] is not None or np.count_nonzero(np.isfinite(d["uv"][:, 0])) >= 2]
+        if rnd == 1:
+            pts = _drop_enlarged_pairs(pts, cams, recs)
         if rnd == 0:
+            # The points made so far take the detections at their projections first: a two-view match
+            # across the caddies is weaker evidence, and may only have what is left.
+            pts = _attach_more(pts, cams, xy, blocked)
+            pts = _grow_across_caddies(pts, cams, xy, recs, blocked, project.caddies(), p["max_allowed_depth"],
+                                       p["max_3d_distance_to_merge"])
             pts = _attach_more(pts, cams, xy, blocked)
     X = np.array([d["X"] for d in pts])
     uv = np.array([d["uv"] for d in pts])
@@ -281,7 +281,7 @@ def initialize_3d(project, frame: int, params: dict | None = None):
     return _command(project, frame, pts, Xo, err, cams, recs)
 
 
-def odd_views_out(cams, uv: np.ndarray) -> np.ndarray:
+def odd_views_out(cams, uv: np.ndarray, caddies=None) -> np.ndarray:
     """Which views of each point the other views disagree with (leave one out).
 
     Parameters
@@ -289,6 +289,12 @@ def odd_views_out(cams, uv: np.ndarray) -> np.ndarray:
     cams : list of Camera
     uv : numpy.ndarray, shape (N, S, 2)
         Raw pixels, NaN where a point has no view.
+    caddies : list of (int, int), optional
+        When given, a view is judged only by other views on two caddies or
+        more: the two views of one caddy fit each other at any depth along
+        their short baseline, so their agreement says nothing (a brow dot's
+        blobs pulled the same way in both cameras of a caddy used to outvote
+        the third camera's view and leave the point on the pulled pair).
 
     Returns
     -------
@@ -314,6 +320,12 @@ def odd_views_out(cams, uv: np.ndarray) -> np.ndarray:
         out_err[rows, s] = e[:, s]
         others = np.where(seen[rows] & (np.arange(S) != s), e, 0.0)
         fit_err[rows, s] = others.max(axis=1)
+        if caddies is not None:
+            rest = seen[rows] & (np.arange(S) != s)
+            spans = np.zeros(len(rows), int)
+            for cad in caddies:
+                spans += rest[:, list(cad)].any(axis=1)
+            fit_err[rows[spans < 2], s] = np.inf
     cand = (out_err > LOO_PX) & (fit_err <= LOO_AGREE_PX)
     worst = np.argmax(np.where(cand, out_err, -1.0), axis=1)
     bad = np.zeros((n, S), bool)
@@ -381,6 +393,94 @@ def _repair_unsupported(pts, cams, xy, blocked, caddies, max_epi, max_depth):
             d["det"][c], d["uv"][c] = j, xy[c][j]
             d["X"] = X
             break
+    return pts
+
+
+def _drop_merged_blobs(pts, cams, recs, blocked):
+    """Leave out the blobs far larger than a marker.
+
+    A blob :data:`~carapost.core.calib.blob_size.GROSS_SIZE` times the frame's
+    typical marker size (mm, at the point's depth) is a dot merged with a shadow
+    or hair: its centre is pulled off the dot, and two such blobs of one caddy
+    can agree with each other along its short baseline and pull the point away
+    from the clean views (a nose tip's blob merged with the nostrils' shadow in
+    two cameras).  Those views are detached and the detections excluded; a grown
+    point left with fewer than two views is dropped, freeing its other
+    detection for other matches.  Seeds are kept as the user made them.
+    ``blocked`` is updated in place.
+    """
+    sizes, typical = blob_sizes_mm(cams, recs, pts)
+    if not np.isfinite(typical) or typical <= 0:
+        return pts
+    ratio = [sz / typical for sz in sizes]
+    for s, r in enumerate(ratio):
+        blocked[s] |= gross_views(r)
+    keep = []
+    for d in pts:
+        views = np.flatnonzero(d["det"] >= 0)
+        if d["id"] is not None or not len(views):
+            keep.append(d)
+            continue
+        gross = gross_views([ratio[s][d["det"][s]] for s in views])
+        if len(views) - np.count_nonzero(gross) < 2:
+            continue
+        if gross.any():
+            d["det"][views[gross]] = -1
+            d["uv"][views[gross]] = np.nan
+            d["X"] = triangulate_many(cams, d["uv"][None])[0]
+        keep.append(d)
+    return keep
+
+
+def _drop_enlarged_pairs(pts, cams, recs):
+    """Drop the grown points left with two views whose blobs are both enlarged.
+
+    Nothing checks two pulled centres against each other (a faint brow dot
+    merged with the brow hair in the only two cameras that find it).  Applied
+    once the points have taken every view they can: a third view makes such a
+    point checkable.
+    """
+    held = view_sizes_mm(cams, recs, pts)
+    if not np.any(np.isfinite(held)):
+        return pts
+    typical = np.nanmedian(held)
+    if not typical > 0:
+        return pts
+    return [d for k, d in enumerate(pts) if d["id"] is not None
+            or not enlarged_pair(held[k][d["det"] >= 0] / typical)]
+
+
+def _grow_across_caddies(pts, cams, xy, recs, blocked, caddies, max_depth, min_gap):
+    """Add the two-view points :func:`~carapost.core.calib.cross_caddy.grow_across` makes from free detections.
+
+    Free: held by no point, not excluded, and farther than ``ATTACH_CLEARANCE_PX``
+    from every point's projection (a detection there is a point's own, left
+    unattached only because it was not clear, e.g. a second blob of one dot).
+    """
+    S = len(cams)
+    free = [~b for b in blocked]
+    X = np.array([d["X"] for d in pts]).reshape(-1, 3)
+    for s in range(S):
+        held = [d["det"][s] for d in pts if d["det"][s] >= 0]
+        free[s][held] = False
+        if len(X) and len(xy[s]):
+            uv = cams[s].project(X)
+            uv = uv[np.all(np.isfinite(uv), axis=1)]
+            if len(uv):
+                free[s] &= cKDTree(uv).query(xy[s])[0] > ATTACH_CLEARANCE_PX
+    _sizes, typical = blob_sizes_mm(cams, recs, pts)
+
+    def size_ratio(s, det, X):
+        return np.asarray(recs[s]["major"][det], float) * cams[s].depth(X) / cams[s].focal_length / typical
+
+    for a, i, b, j, Xn in grow_across(cams, xy, free, caddies, X, max_depth, min_gap, REJECT_PX,
+                                      size_ratio if np.isfinite(typical) and typical > 0 else None,
+                                      RELAXED_DEPTH * max_depth):
+        det = np.full(S, -1)
+        det[a], det[b] = i, j
+        uv = np.full((S, 2), np.nan)
+        uv[a], uv[b] = xy[a][i], xy[b][j]
+        pts.append({"id": None, "det": det, "uv": uv, "X": Xn})
     return pts
 
 
