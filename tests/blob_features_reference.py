@@ -1,4 +1,4 @@
-"""The numpy implementations of the candidate stage's noise estimate, DoG maxima and features.
+"""The numpy implementations of the candidate stage's noise estimate, DoG maxima, sub-pixel offsets and features.
 
 Test-only reference: ``tests/test_blob_measure_kernel.py`` checks that the compiled
 kernels (:mod:`carapost.core.blobs.candidate_kernel`) compute the same.
@@ -22,22 +22,38 @@ def noise_sigma_reference(img: np.ndarray) -> float:
     return max(0.5, 1.4826 * med / np.sqrt(2.0))
 
 
-def candidates_reference(lvl: np.ndarray, floor: float):
-    """Local maxima of the DoG response on one level, as :func:`carapost.core.blobs.features.candidates`."""
-    g = cv2.GaussianBlur(lvl, (0, 0), SIGMA_C)
-    dog = g - cv2.GaussianBlur(lvl, (0, 0), SIGMA_S)
+def maxima_reference(dog: np.ndarray, floor: float, b: int):
+    """Pixels of ``dog`` above ``floor`` and >= their 8 neighbours, ``b`` px or more inside (row-major)."""
     peak = (dog >= cv2.dilate(dog, None)) & (dog > floor)
-    b = PATCH_R + 1
     peak[:b] = False
     peak[-b:] = False
     peak[:, :b] = False
     peak[:, -b:] = False
-    ys, xs = np.nonzero(peak)
+    return np.nonzero(peak)
+
+
+def candidates_reference(lvl: np.ndarray, floor: float, work=None, key=0):
+    """Local maxima of the DoG response on one level and their sub-pixel offsets, as
+    :func:`carapost.core.blobs.features.candidates` (``work`` and ``key`` are ignored)."""
+    g = cv2.GaussianBlur(lvl, (0, 0), SIGMA_C)
+    dog = g - cv2.GaussianBlur(lvl, (0, 0), SIGMA_S)
+    ys, xs = maxima_reference(dog, floor, PATCH_R + 1)
     v = dog[ys, xs]
     if len(v) > MAX_CANDIDATES:
         keep = np.argpartition(-v, MAX_CANDIDATES)[:MAX_CANDIDATES]
         ys, xs, v = ys[keep], xs[keep], v[keep]
-    return ys, xs, v, g, dog
+    return (ys, xs, v, g, *subpixel_reference(dog, ys, xs))
+
+
+def subpixel_reference(dog: np.ndarray, ys: np.ndarray, xs: np.ndarray):
+    """Sub-pixel offsets of DoG maxima, as :func:`carapost.core.blobs.features.candidates` gives them (float32)."""
+    W = dog.shape[1]
+    d = dog.ravel()
+    c = ys * W + xs
+    l, r, u, b, m = d[c - 1], d[c + 1], d[c - W], d[c + W], d[c]
+    dx = 0.5 * (l - r) / np.minimum(l + r - 2 * m, -1e-6)
+    dy = 0.5 * (u - b) / np.minimum(u + b - 2 * m, -1e-6)
+    return np.clip(dx, -0.5, 0.5), np.clip(dy, -0.5, 0.5)
 
 
 def features_reference(lvl: np.ndarray, g: np.ndarray, ys: np.ndarray, xs: np.ndarray, dog: np.ndarray,

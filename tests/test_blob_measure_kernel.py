@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from blob_features_reference import (candidates_reference, features_reference, greedy_nms_reference,
-                                     noise_sigma_reference)
+                                     maxima_reference, noise_sigma_reference, subpixel_reference)
 from blob_measure_reference import extract, measure_reference
+from carapost.core.blobs import candidate_kernel as ck
 from carapost.core.blobs import centre
 from carapost.core.blobs import detector as det
 from carapost.core.blobs import features as fe
@@ -120,17 +121,23 @@ def test_measure_refuses_windows_outside_the_image():
 
 def test_candidates_features_and_noise_equal_the_numpy_versions(frames):
     checked = 0
+    work = fe.Workspace()
     for white, image in frames:
         img = as_grey_u8(image)
         assert fe.noise_sigma(img) == noise_sigma_reference(img)
         bright = img if white else cv2.bitwise_not(img)
         for level, lvl in fe.pyramid(bright, [1, 2, 3, 4]).items():
-            padded = cv2.copyMakeBorder(lvl, 5, 5, 5, 5, cv2.BORDER_REPLICATE)
+            padded = cv2.copyMakeBorder(lvl, 5, 5, 5, 5, cv2.BORDER_REPLICATE).astype(np.float32)
+            np.testing.assert_array_equal(fe.padded_level(lvl, 5), padded)
+            np.testing.assert_array_equal(fe.padded_level(lvl, 5, work, level), padded)
             for floor in (0.6, 3.0):
                 got, want = fe.candidates(padded, floor), candidates_reference(padded, floor)
                 for a, b in zip(got, want):
                     np.testing.assert_array_equal(a, b)
-            ys, xs, v, g, _ = got
+                # The same in a workspace's arrays.
+                for a, b in zip(fe.candidates(padded, floor, work, level), got):
+                    np.testing.assert_array_equal(a, b)
+            ys, xs, v, g, _, _ = got
             F = fe.features(padded, g, ys, xs, v, level, 2.0)
             # float64 input makes the numpy version's sums exact enough to compare closely.
             F64 = features_reference(padded.astype(np.float64), g.astype(np.float64), ys, xs, v.astype(np.float64),
@@ -138,6 +145,44 @@ def test_candidates_features_and_noise_equal_the_numpy_versions(frames):
             np.testing.assert_allclose(F, F64.astype(np.float32), rtol=2e-6, atol=2e-6)
             checked += len(ys)
     assert checked > 2000
+
+
+def test_dog_peaks_of_a_plateau_keep_every_pixel():
+    # A plateau above the floor is all maxima: far more than the kernel's first allocation.
+    g = np.full((60, 80), 5.0, np.float32)
+    s = np.zeros_like(g)
+    s[30, 40] = 1.0                                     # one dip: its 8 neighbours stay maxima
+    ys, xs, v, ox, oy = ck.dog_peaks(g, s, np.float32(0.6), 5)
+    want = maxima_reference(g - s, np.float32(0.6), 5)
+    np.testing.assert_array_equal(ys, want[0])
+    np.testing.assert_array_equal(xs, want[1])
+    assert len(ys) == 50 * 70 - 1 > 1024
+    np.testing.assert_array_equal(v, (g - s)[ys, xs])
+    for a, b in zip((ox, oy), subpixel_reference(g - s, ys, xs)):
+        np.testing.assert_array_equal(a, b)
+    assert [len(a) for a in ck.dog_peaks(g[:10], s[:10], np.float32(0.6), 5)] == [0] * 5
+
+
+def test_workspace_arrays_follow_the_image_size():
+    work = fe.Workspace()
+    a = work.image("x", (4, 5))
+    assert work.image("x", (4, 5)) is a
+    b = work.image("x", (6, 5))
+    assert b.shape == (6, 5) and b.dtype == np.float32
+    assert work.image("x", (6, 5), np.uint8).dtype == np.uint8
+    # find_candidates on images of two sizes in one thread: each as with nothing reused.
+    for shape in ((200, 300), (120, 160), (200, 300)):
+        img = render(np.random.default_rng(shape[0]), *shape, markers=10, white=False, radius=(2.0, 6.0),
+                     noise=(1.0, 2.0), confusers=2).image
+        reused, _ = find_candidates(img, False, 4.0, 50.0)
+        saved, fe._local.workspace = fe.workspace(), fe.Workspace()
+        try:
+            fresh, _ = find_candidates(img, False, 4.0, 50.0)
+        finally:
+            fe._local.workspace = saved
+        assert len(reused.x) > 5
+        np.testing.assert_array_equal(reused.feats, fresh.feats)
+        np.testing.assert_array_equal(reused.x, fresh.x)
 
 
 def test_noise_estimate_of_tiny_and_flat_images():

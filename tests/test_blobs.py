@@ -1,6 +1,8 @@
 """Blob detection: the detector's filters and inputs, and the undoable blob operations."""
 from __future__ import annotations
 
+import sys
+
 import cv2
 import numpy as np
 import pytest
@@ -374,3 +376,39 @@ def test_cli_detect_blobs_and_csv(take, tmp_path):
     args = ap.parse_args(["detect-blobs", "--sources", *srcs, "--set", "blob.nope=1"])
     with pytest.raises(CaraError):
         args.func(args)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc only (keep_freed_memory)")
+def test_range_detection_stops_the_page_faults_of_each_frame(tmp_path):
+    """Detect Blobs [Active Range] keeps freed memory: a frame's ~1 MB images are reused, not faulted in again.
+
+    Each run is a fresh process (the C heap's state is the process's); the frames
+    are rendered here, as a process that decodes them would not have freed large
+    blocks beforehand (that alone raises glibc's thresholds for a while).
+    """
+    import subprocess
+    import textwrap
+
+    np.save(tmp_path / "frames.npy", np.stack([s.image for s in sample_frames(False, seed=0, frames=1)]))
+    code = textwrap.dedent("""
+        import resource, sys
+        import numpy as np
+        from carapost.core.blob_ops import detect_frames
+        from carapost.core.properties import Properties
+
+        imgs = list(np.load(sys.argv[2]))
+        if sys.argv[1] == "default":
+            from carapost.core import heap
+            heap._done = True                                           # as if glibc were left alone
+        detect_frames(enumerate(imgs), Properties(), workers=1)         # warm up
+        f = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        detect_frames(enumerate(imgs * 2), Properties(), workers=1)
+        print((resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f) / (2 * len(imgs)))
+    """)
+    per_frame = {}
+    for mode in ("default", "kept"):
+        out = subprocess.run([sys.executable, "-c", code, mode, str(tmp_path / "frames.npy")], capture_output=True,
+                             text=True, check=True)
+        per_frame[mode] = float(out.stdout.split()[-1])
+    assert per_frame["default"] > 100, per_frame       # the images of each frame, faulted in again
+    assert per_frame["kept"] < 0.1 * per_frame["default"], per_frame

@@ -19,30 +19,81 @@ from numba import njit
 from .measure_kernel import JIT
 
 
-@njit(**JIT)
-def dog_maxima(dog, floor, border):
-    """Pixels of ``dog`` above ``floor`` that are >= their 8 neighbours, ``border`` px or more inside.
+#: The options of :func:`dog_peaks`: no ``fastmath`` (nothing to vectorise there needs it, and the
+#: sub-pixel offsets must be numpy's float32 arithmetic, operation for operation).
+JIT_EXACT = dict(cache=True, nogil=True)
 
-    Step 1, the candidate centres: returns ``(ys, xs)`` in row-major order (as
-    ``np.nonzero`` gives them).  Most pixels fail the floor, so the neighbours
-    are compared only for the others.
+
+@njit(**JIT_EXACT)
+def _dog_row(g, s, i, out):
+    """Row ``i`` of the DoG ``g - s`` (float32, as numpy subtracts) into ``out``."""
+    gi, si = g[i], s[i]
+    for j in range(len(out)):
+        out[j] = gi[j] - si[j]
+
+
+@njit(**JIT_EXACT)
+def _grow(a, n):
+    """``a`` copied into a new array of length ``n`` (>= ``len(a)``)."""
+    out = np.empty(n, a.dtype)
+    out[:len(a)] = a
+    return out
+
+
+@njit(**JIT_EXACT)
+def dog_peaks(g, s, floor, border):
+    """Local maxima of the DoG ``g - s`` above ``floor``, ``border`` px or more inside, with sub-pixel offsets.
+
+    Step 1, the candidate centres: pixels above ``floor`` and >= their 8
+    neighbours, in row-major order (as ``np.nonzero`` gives them).  Returns
+    ``(ys, xs, v, ox, oy)``: the DoG there and the offsets of a parabola through
+    each axis's neighbours (float32, clipped to half a pixel).  The DoG is made
+    three rows at a time, never as a whole image.
     """
-    H, W = dog.shape
-    # Room for every pixel (a flat plateau above the floor is all maxima); untouched pages cost nothing.
-    ys = np.empty(max(H * W, 1), np.int64)
-    xs = np.empty(max(H * W, 1), np.int64)
+    H, W = g.shape
+    # Grown by doubling: room for every pixel (a flat plateau above the floor is all maxima) would be
+    # megabytes mapped and unmapped per level, and page faults cost more than the search.
+    cap = 1024
+    ys = np.empty(cap, np.int64)
+    xs = np.empty(cap, np.int64)
+    v = np.empty(cap, np.float32)
+    ox = np.empty(cap, np.float32)
+    oy = np.empty(cap, np.float32)
     k = 0
+    if H - 2 * border <= 0 or W - 2 * border <= 0:
+        return ys[:0].copy(), xs[:0].copy(), v[:0].copy(), ox[:0].copy(), oy[:0].copy()
+    up = np.empty(W, np.float32)
+    mid = np.empty(W, np.float32)
+    down = np.empty(W, np.float32)
+    n = W - 2 * border
+    half, two, tiny, lim = np.float32(0.5), np.float32(2.0), np.float32(-1e-6), np.float32(0.5)
+    _dog_row(g, s, border - 1, up)
+    _dog_row(g, s, border, mid)
     for i in range(border, H - border):
-        for j in range(border, W - border):
-            v = dog[i, j]
-            if v > floor:
-                if (v >= dog[i - 1, j - 1] and v >= dog[i - 1, j] and v >= dog[i - 1, j + 1] and v >= dog[i, j - 1]
-                        and v >= dog[i, j + 1] and v >= dog[i + 1, j - 1] and v >= dog[i + 1, j]
-                        and v >= dog[i + 1, j + 1]):
-                    ys[k] = i
-                    xs[k] = j
-                    k += 1
-    return ys[:k].copy(), xs[:k].copy()
+        _dog_row(g, s, i + 1, down)
+        left, c, right = mid[border - 1:border - 1 + n], mid[border:border + n], mid[border + 1:border + 1 + n]
+        for q in range(n):
+            if not (c[q] > floor and c[q] >= left[q] and c[q] >= right[q]):
+                continue
+            j = q + border
+            m = mid[j]
+            if (m >= up[j - 1] and m >= up[j] and m >= up[j + 1] and m >= down[j - 1] and m >= down[j]
+                    and m >= down[j + 1]):
+                if k == cap:
+                    cap *= 2
+                    ys, xs, v, ox, oy = _grow(ys, cap), _grow(xs, cap), _grow(v, cap), _grow(ox, cap), _grow(oy, cap)
+                ys[k] = i
+                xs[k] = j
+                v[k] = m
+                l, r, u, b = mid[j - 1], mid[j + 1], up[j], down[j]
+                # numpy's float32 arithmetic: 0.5 * (l - r) / minimum(l + r - 2 m, -1e-6), clipped.
+                dx = half * (l - r) / min(l + r - two * m, tiny)
+                dy = half * (u - b) / min(u + b - two * m, tiny)
+                ox[k] = min(max(dx, -lim), lim)
+                oy[k] = min(max(dy, -lim), lim)
+                k += 1
+        up, mid, down = mid, down, up
+    return ys[:k].copy(), xs[:k].copy(), v[:k].copy(), ox[:k].copy(), oy[:k].copy()
 
 
 @njit(**JIT)

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
+from ..heap import keep_freed_memory
 from . import features as fe
 from .candidate_kernel import greedy_nms
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, measure_at, window_for
@@ -73,23 +74,26 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
     """Step 1: candidate centres and their features (``img`` is grey uint8).
 
     Returns the candidates and the "bright blob" image (inverted for black).
+    The C heap is told to keep freed memory first (:func:`~carapost.core.heap.keep_freed_memory`):
+    each detection allocates and frees the same ~1 MB images.
     """
+    keep_freed_memory()
     bright = img if white else cv2.bitwise_not(img)
     noise = fe.noise_sigma(img)
     levels = fe.levels_for(min_major, max_major)
     pyr = fe.pyramid(bright, levels)
+    work = fe.workspace()
     xs_all, ys_all, lv_all, f_all = [], [], [], []
     b = fe.PATCH_R + 1
     for level, lvl in pyr.items():
         if min(lvl.shape) < 2 * b + 3:
             continue
         lnoise = noise / 2.0 ** level
-        padded = cv2.copyMakeBorder(lvl, b, b, b, b, cv2.BORDER_REPLICATE)
-        ys, xs, dog, g, dmap = fe.candidates(padded, max(0.6, 0.5 * lnoise))
+        padded = fe.padded_level(lvl, b, work, level)
+        ys, xs, dog, g, ox, oy = fe.candidates(padded, max(0.6, 0.5 * lnoise), work, level)
         if len(ys) == 0:
             continue
         f_all.append(fe.features(padded, g, ys, xs, dog, level, noise))
-        ox, oy = fe.subpixel(dmap, ys, xs)
         scale = 2.0 ** level
         xs_all.append((xs + ox - b + 0.5) * scale - 0.5)
         ys_all.append((ys + oy - b + 0.5) * scale - 0.5)

@@ -91,6 +91,19 @@ def _cubic(t, w):
 def _sobel_box(img, x0, y0, nx, ny, gx, gy):
     """Sobel gradients (/8) of the box ``[x0, x0+nx) x [y0, y0+ny)``, image edges replicated."""
     H, W = img.shape
+    if x0 >= 1 and y0 >= 1 and x0 + nx + 1 <= W and y0 + ny + 1 <= H:
+        # Inside the image: no clamping, and rows the compiler vectorises.
+        for j in range(ny):
+            rm, rc, rp = img[y0 + j - 1], img[y0 + j], img[y0 + j + 1]
+            gxj, gyj = gx[j], gy[j]
+            for i in range(nx):
+                xm, xc, xp = x0 + i - 1, x0 + i, x0 + i + 1
+                a, b, c = float(rm[xm]), float(rm[xc]), float(rm[xp])
+                d, f = float(rc[xm]), float(rc[xp])
+                g, h, k = float(rp[xm]), float(rp[xc]), float(rp[xp])
+                gxj[i] = ((c + 2.0 * f + k) - (a + 2.0 * d + g)) * 0.125
+                gyj[i] = ((g + 2.0 * h + k) - (a + 2.0 * b + c)) * 0.125
+        return
     for j in range(ny):
         ym = min(max(y0 + j - 1, 0), H - 1)
         yc = min(max(y0 + j, 0), H - 1)
@@ -206,7 +219,7 @@ def _edge_points(img, cx, cy, a, b, th, ex, ey, peak):
         ex[k], ey[k], peak[k] = px + nx * t, py + ny * t, g1
 
 
-@njit(**JIT)
+@njit(error_model="numpy", **JIT)       # a zero vector's norm divides as numpy does (nan), not raises
 def _smallest_eigenvector(S):
     """Unit eigenvector of the smallest eigenvalue of the 6x6 scatter matrix ``S`` (inverse iteration).
 
@@ -241,8 +254,14 @@ def _smallest_eigenvector(S):
             for k in range(i + 1, 6):
                 t -= L[k, i] * z[k]
             z[i] = t / L[i, i]
-        norm = math.sqrt((z * z).sum())
-        z /= norm
+        # Loops, not array expressions: numba names a cached array expression after an address that
+        # another cached function, compiled in another process, can share (wrong code, or a crash).
+        norm = 0.0
+        for i in range(6):
+            norm += z[i] * z[i]
+        norm = math.sqrt(norm)
+        for i in range(6):
+            z[i] /= norm
     return z
 
 
@@ -265,9 +284,13 @@ def _conic_solve(u, v, w, scale, res):
         if w[k] == 0.0:
             continue
         m[0], m[1], m[2], m[3], m[4], m[5] = u[k] * u[k], u[k] * v[k], v[k] * v[k], u[k], v[k], 1.0
+        # The upper triangle only: the matrix is symmetric (m_i m_j == m_j m_i exactly).
         for i in range(6):
-            for j in range(6):
+            for j in range(i, 6):
                 S[i, j] += m[i] * m[j]
+    for i in range(6):
+        for j in range(i):
+            S[i, j] = S[j, i]
     z = _smallest_eigenvector(S)
     A, B, C, D, E, F = z[0], z[1], z[2], z[3], z[4], z[5]
     det = 4.0 * A * C - B * B
@@ -300,9 +323,15 @@ def _conic_axes(z, x0, y0):
 
 
 @njit(**JIT)
-def _median_of_used(r, used):
-    """The (lower) median of ``r`` where ``used``; infinity when none is."""
-    vals = np.sort(r[used])
+def _median_of_used(r, w):
+    """The (lower) median of ``r`` where the weight ``w`` is positive; infinity when none is."""
+    vals = np.empty(len(r))
+    k = 0
+    for i in range(len(r)):
+        if w[i] > 0.0:
+            vals[k] = r[i]
+            k += 1
+    vals = np.sort(vals[:k])
     if len(vals) == 0:
         return np.inf
     return vals[(len(vals) - 1) // 2]
@@ -327,9 +356,14 @@ def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False):
     spread = np.inf
     for _ in range(ROUNDS):
         x0, y0, ok = _conic_fit(u, v, w, a, res)
-        spread = 1.4826 * _median_of_used(res, w > 0.0) + 0.02
+        spread = 1.4826 * _median_of_used(res, w) + 0.02
+        same = True
         for k in range(RAYS):
-            w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 and res[k] < 3.0 * spread else 0.0
+            wk = 1.0 if peak[k] > lim and peak[k] > 0.0 and res[k] < 3.0 * spread else 0.0
+            same = same and wk == w[k]
+            w[k] = wk
+        if same:
+            break       # the same points: another round would fit the same conic
     n = w.sum()
     dx, dy = x0 * a, y0 * a
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
@@ -375,7 +409,7 @@ def _fit_arcs(u, v, peak, lim, a, b, buf):
         for k in range(RAYS):
             w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 and res[k] < INLIER else 0.0
     n = w.sum()
-    spread = 1.4826 * _median_of_used(res, w > 0.0) + 0.02
+    spread = 1.4826 * _median_of_used(res, w) + 0.02
     dx, dy = x0 * a, y0 * a
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
     return dx, dy, clean, spread, n

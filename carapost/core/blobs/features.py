@@ -13,6 +13,8 @@ still have their own trained weights).
 """
 from __future__ import annotations
 
+import threading
+
 import cv2
 import numpy as np
 
@@ -73,18 +75,65 @@ def noise_sigma(img: np.ndarray) -> float:
 
 
 def pyramid(bright: np.ndarray, levels: list[int]) -> dict[int, np.ndarray]:
-    """The float32 images of the requested pyramid levels (level 0 is the input)."""
+    """The uint8 images of the requested pyramid levels (level 0 is the input)."""
     out = {}
     cur = bright
     for level in range(1, max(levels) + 1):
         cur = cv2.pyrDown(cur)
         if level in levels:
-            out[level] = cur.astype(np.float32)
+            out[level] = cur
     return out
 
 
-def candidates(lvl: np.ndarray, floor: float):
-    """Local maxima of the DoG response on one level.
+class Workspace:
+    """One thread's reusable images for :func:`padded_level` and :func:`candidates`.
+
+    Level 1's padded image and blurs are ~1 MB each at 1280x720: allocated
+    afresh per frame, glibc mapped, page-faulted and unmapped them again (measured:
+    ~800 page faults per frame, ~2 ms of system time, and the threads of Detect
+    Blobs [Active Range] queue on the process's memory map for each fault).  Reused,
+    they cost nothing, whatever the C heap does (see :mod:`carapost.core.heap`).
+    """
+
+    def __init__(self):
+        self._images: dict = {}
+
+    def image(self, name: str, shape: tuple, dtype=np.float32) -> np.ndarray:
+        """The array called ``name`` of ``shape`` and ``dtype`` (contents undefined)."""
+        a = self._images.get(name)
+        if a is None or a.shape != shape or a.dtype != dtype:
+            a = self._images[name] = np.empty(shape, dtype)
+        return a
+
+
+_local = threading.local()
+
+
+def workspace() -> Workspace:
+    """The calling thread's :class:`Workspace` (one per thread: the range operation's pool detects in parallel)."""
+    ws = getattr(_local, "workspace", None)
+    if ws is None:
+        ws = _local.workspace = Workspace()
+    return ws
+
+
+def padded_level(lvl: np.ndarray, border: int, work: Workspace | None = None, key=0) -> np.ndarray:
+    """A uint8 pyramid level as float32, its edge replicated ``border`` px (in ``work``'s arrays when given)."""
+    if work is None:
+        return cv2.copyMakeBorder(lvl, border, border, border, border, cv2.BORDER_REPLICATE).astype(np.float32)
+    shape = (lvl.shape[0] + 2 * border, lvl.shape[1] + 2 * border)
+    pad8 = cv2.copyMakeBorder(lvl, border, border, border, border, cv2.BORDER_REPLICATE,
+                              dst=work.image(("pad8", key), shape, np.uint8))
+    out = work.image(("pad", key), shape)
+    np.copyto(out, pad8)
+    return out
+
+
+def candidates(lvl: np.ndarray, floor: float, work: Workspace | None = None, key=0):
+    """Local maxima of the DoG response on one level (float32), with sub-pixel offsets.
+
+    With ``work``, the blurred images are ``work``'s arrays ``key`` (the next
+    call with that key overwrites them).
 
     Returns
     -------
@@ -94,31 +143,24 @@ def candidates(lvl: np.ndarray, floor: float):
         The DoG response at them.
     g : ndarray float32
         The centre-blurred level image (for the Hessian feature).
+    ox, oy : ndarray float32
+        Sub-pixel offsets of each maximum, by a parabola through each axis's
+        neighbours (within half a pixel).  Coarse-octave candidates are whole
+        level pixels (2-16 full pixels) off: the fit converges faster and in
+        fewer re-centred windows from a better start.
     """
-    g = cv2.GaussianBlur(lvl, (0, 0), SIGMA_C)
-    dog = g - cv2.GaussianBlur(lvl, (0, 0), SIGMA_S)
+    if work is None:
+        g = cv2.GaussianBlur(lvl, (0, 0), SIGMA_C)
+        s = cv2.GaussianBlur(lvl, (0, 0), SIGMA_S)
+    else:
+        g = cv2.GaussianBlur(lvl, (0, 0), SIGMA_C, dst=work.image(("g", key), lvl.shape))
+        s = cv2.GaussianBlur(lvl, (0, 0), SIGMA_S, dst=work.image(("s", key), lvl.shape))
     # The floor as float32, as the DoG is compared with it.
-    ys, xs = ck.dog_maxima(dog, np.float32(floor), PATCH_R + 1)
-    v = dog[ys, xs]
+    ys, xs, v, ox, oy = ck.dog_peaks(g, s, np.float32(floor), PATCH_R + 1)
     if len(v) > MAX_CANDIDATES:
         keep = np.argpartition(-v, MAX_CANDIDATES)[:MAX_CANDIDATES]
-        ys, xs, v = ys[keep], xs[keep], v[keep]
-    return ys, xs, v, g, dog
-
-
-def subpixel(dog: np.ndarray, ys: np.ndarray, xs: np.ndarray):
-    """Sub-pixel offsets (dx, dy) of DoG maxima by a parabola through each axis's neighbours.
-
-    Coarse-octave candidates are whole level pixels (2-16 full pixels) off; the
-    fit converges faster and in fewer re-centred windows from a better start.
-    """
-    W = dog.shape[1]
-    d = dog.ravel()
-    c = ys * W + xs
-    l, r, u, b, m = d[c - 1], d[c + 1], d[c - W], d[c + W], d[c]
-    dx = 0.5 * (l - r) / np.minimum(l + r - 2 * m, -1e-6)
-    dy = 0.5 * (u - b) / np.minimum(u + b - 2 * m, -1e-6)
-    return np.clip(dx, -0.5, 0.5), np.clip(dy, -0.5, 0.5)
+        ys, xs, v, ox, oy = ys[keep], xs[keep], v[keep], ox[keep], oy[keep]
+    return ys, xs, v, g, ox, oy
 
 
 def features(lvl: np.ndarray, g: np.ndarray, ys: np.ndarray, xs: np.ndarray, dog: np.ndarray,

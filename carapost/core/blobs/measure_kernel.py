@@ -64,36 +64,46 @@ def window_gradients(P, n, tmp, gx, gy, sums):
     """
     m = n - 1
     rx, ry, vx, vy = tmp[0], tmp[1], tmp[2], tmp[3]
+    # Rows as slices indexed by the loop counter: numba then knows no index is negative
+    # (no wrap-around test per element) and the loops vectorise.
     for i in range(m):
+        Pa, Pb = P[i * n:i * n + n], P[(i + 1) * n:(i + 1) * n + n]
+        rxi, ryi = rx[i * m:i * m + m], ry[i * m:i * m + m]
         for j in range(m):
-            s = P[(i + 1) * n + j + 1] - P[i * n + j]
-            t = P[(i + 1) * n + j] - P[i * n + j + 1]
-            rx[i * m + j] = 0.5 * (s - t)
-            ry[i * m + j] = 0.5 * (s + t)
+            s = Pb[j + 1] - Pa[j]
+            t = Pb[j] - Pa[j + 1]
+            rxi[j] = 0.5 * (s - t)
+            ryi[j] = 0.5 * (s + t)
     # The 3x3 sum: sums of three rows, then of three columns.
     for i in range(m):
         u = max(i - 1, 0) * m
         c = i * m
         d = min(i + 1, m - 1) * m
+        ru, rc, rd = rx[u:u + m], rx[c:c + m], rx[d:d + m]
+        su, sc, sd = ry[u:u + m], ry[c:c + m], ry[d:d + m]
+        vxi, vyi = vx[c:c + m], vy[c:c + m]
         for j in range(m):
-            vx[c + j] = rx[u + j] + rx[c + j] + rx[d + j]
-            vy[c + j] = ry[u + j] + ry[c + j] + ry[d + j]
+            vxi[j] = ru[j] + rc[j] + rd[j]
+            vyi[j] = su[j] + sc[j] + sd[j]
     ninth = 1.0 / 9.0
     for i in range(m):
         c = i * m
         gx[c] = (vx[c] + vx[c] + vx[c + 1]) * ninth
         gy[c] = (vy[c] + vy[c] + vy[c + 1]) * ninth
-        for j in range(1, m - 1):
-            gx[c + j] = (vx[c + j - 1] + vx[c + j] + vx[c + j + 1]) * ninth
-            gy[c + j] = (vy[c + j - 1] + vy[c + j] + vy[c + j + 1]) * ninth
+        a, b = vx[c:c + m], vy[c:c + m]
+        ox, oy = gx[c + 1:c + m - 1], gy[c + 1:c + m - 1]
+        for j in range(m - 2):
+            ox[j] = (a[j] + a[j + 1] + a[j + 2]) * ninth
+            oy[j] = (b[j] + b[j + 1] + b[j + 2]) * ninth
         gx[c + m - 1] = (vx[c + m - 2] + vx[c + m - 1] + vx[c + m - 1]) * ninth
         gy[c + m - 1] = (vy[c + m - 2] + vy[c + m - 1] + vy[c + m - 1]) * ninth
     sx = sy = sxx = syy = 0.0
+    gxa, gya = gx[:m * m], gy[:m * m]
     for k in range(m * m):
-        sx += gx[k]
-        sy += gy[k]
-        sxx += gx[k] * gx[k]
-        syy += gy[k] * gy[k]
+        sx += gxa[k]
+        sy += gya[k]
+        sxx += gxa[k] * gxa[k]
+        syy += gya[k] * gya[k]
     sums[0], sums[1], sums[2], sums[3] = sx, sy, sxx, syy
 
 
@@ -381,7 +391,10 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
                 for j in range(n - 1):
                     GX[i * (n - 1) + j] = j - h + 0.5
                     GY[i * (n - 1) + j] = i - h + 0.5
+        x0 = ix[k] - h
         for i in range(n):
+            src = img[iy[k] - h + i, x0:x0 + n]
+            dst = P[i * n:i * n + n]
             for j in range(n):
-                P[i * n + j] = img[iy[k] - h + i, ix[k] - h + j]
+                dst[j] = src[j]
         measure_one(h, max(float(r0[k]), 1.0), noise, passes, c, S, out[k], extra[k])
