@@ -12,8 +12,8 @@ import threading
 import cv2
 import numpy as np
 
-from carapost.core.blobs.edges import (ARCS, COARSE, INLIER, INNER, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS, RAYS,
-                                       REACH, STEP, TRUST, WEAK)
+from carapost.core.blobs.edges import (ARC_MOVE, ARCS, COARSE, INLIER, INNER, MAX_MOVE, MAX_SCATTER, MERGED,
+                                       MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
 _PHI = np.linspace(0.0, 2.0 * np.pi, RAYS, endpoint=False)
@@ -123,7 +123,7 @@ def _fit_edges(gx, gy, x, y, a, b, th):
     dx, dy = x0 * scale, y0 * scale
     n = w.sum(axis=1)
     clean = ok & (n >= MIN_RAYS * RAYS) & (spread < MAX_SCATTER) & (np.hypot(dx, dy) < MAX_MOVE * b)
-    redo = np.flatnonzero(~clean)
+    redo = np.flatnonzero(~clean & (np.hypot(dx, dy) > ARC_MOVE))
     if len(redo) and ARCS > 0:
         out = _fit_arcs(u[redo], v[redo], good[redo], scale[redo], b[redo])
         for arr, new in zip((dx, dy, clean, spread, n), out):

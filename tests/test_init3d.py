@@ -350,3 +350,34 @@ def test_the_two_views_of_one_caddy_do_not_outvote_a_third_view():
     uv[:, 1] = np.nan
     assert odd_views_out(cams, uv)[:, 0].all()          # judged by the pair alone, camera 0 was always out
     assert not odd_views_out(cams, uv, sc.project.caddies())[:, 0].any()
+
+
+def test_of_two_views_either_of_which_explains_the_third_the_larger_blob_goes():
+    """Three views, one pulled 1 px off its dot (a brow dot fused with the brow): leaving out the pulled view
+    or the clean view of the same caddy leaves two views of both caddies that fit each other, so the
+    reprojection errors alone pick either.  The pulled blob measures larger (mm at its depth): it goes."""
+    from carapost.core.calib.init3d import odd_views_out
+
+    sc = make_scene(35, seed=2)
+    cams = sc.cameras[0]
+    caddies = sc.project.caddies()
+    X = sc.face[0][:20]
+    uv = np.stack([c.project(X) for c in cams], axis=1)
+    a, b = caddies[0]
+    other = caddies[1][0]
+    uv[:, caddies[1][1]] = np.nan
+    # Camera a's blob pulled 1 px along its epipolar line with the other caddy's camera (the dot moved
+    # along that camera's ray): that pair fits itself, and the clean view of a's caddy is as far off.
+    ray = X - cams[other].position
+    ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+    step = np.linalg.norm(cams[a].project(X + ray) - uv[:, a], axis=1)
+    uv[:, a] = cams[a].project(X + ray / step[:, None])
+    sizes = np.full(uv.shape[:2], 2.0)
+    sizes[:, a] = 2.6
+    plain = odd_views_out(cams, uv, caddies)
+    by_size = odd_views_out(cams, uv, caddies, sizes)
+    assert plain[:, b].sum() >= 5                  # errors alone often drop the clean view
+    assert by_size[:, a].all() and not by_size[:, [b, other]].any()
+    # Blobs of about one size: the errors decide, as before.
+    sizes[:, a] = 2.1
+    assert (odd_views_out(cams, uv, caddies, sizes) == plain).all()

@@ -64,6 +64,8 @@ ROUNDS = 3
 #: edge point agrees with an arc's ellipse, px.
 ARCS = 12
 INLIER = 0.35
+#: The arcs are tried only when the whole edge's conic is centred more than this far (px) from the blob.
+ARC_MOVE = 0.3
 
 _SAMPLES = int(round(2 * REACH / STEP)) + 1
 #: The coarse search's step, in samples.
@@ -367,7 +369,9 @@ def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False):
     n = w.sum()
     dx, dy = x0 * a, y0 * a
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
-    if not clean and arcs and ARCS > 0:
+    # A scattered whole edge whose conic is centred where the blob already is confirms that centre;
+    # one centred elsewhere may be a dot's outline spoiled on one side.
+    if not clean and arcs and ARCS > 0 and math.hypot(dx, dy) > ARC_MOVE:
         return _fit_arcs(u, v, peak, lim, a, b, buf)
     return dx, dy, clean, spread, n
 

@@ -49,6 +49,9 @@ REJECT_PX = 2.0
 #: error out among the good views).
 LOO_PX = 0.6
 LOO_AGREE_PX = 0.25
+#: Of several views whose removal makes the rest agree, a blob this many times larger (mm) than the
+#: next is the pulled one (a brow dot fused with the brow: 1.3 times the other view's blob).
+LOO_SIZE = 1.15
 #: Once growth within Max Allowed Depth stops, matches the other caddy confirms may lie this many times
 #: farther from the points.
 RELAXED_DEPTH = 3.0
@@ -254,9 +257,10 @@ def initialize_3d(project, frame: int, params: dict | None = None):
         err = err[len(bX):]
         for k, d in enumerate(pts):
             d["X"] = Xo[len(bX) + k]
-        split = caddy_split(cams, uv, view_sizes_mm(cams, recs, pts), project.caddies())
+        sizes = view_sizes_mm(cams, recs, pts)
+        split = caddy_split(cams, uv, sizes, project.caddies())
         # Leave-one-out would judge the kept caddy's views against the pulled pair's.
-        loo = odd_views_out(cams, uv, project.caddies()) & ~split.any(axis=1, keepdims=True)
+        loo = odd_views_out(cams, uv, project.caddies(), sizes) & ~split.any(axis=1, keepdims=True)
         for k, d in enumerate(pts):
             bad = (np.isfinite(err[k]) & (err[k] > REJECT_PX)) | loo[k] | split[k]
             if d["id"] is None:     # seeds keep what the user attached
@@ -281,7 +285,7 @@ def initialize_3d(project, frame: int, params: dict | None = None):
     return _command(project, frame, pts, Xo, err, cams, recs)
 
 
-def odd_views_out(cams, uv: np.ndarray, caddies=None) -> np.ndarray:
+def odd_views_out(cams, uv: np.ndarray, caddies=None, sizes=None) -> np.ndarray:
     """Which views of each point the other views disagree with (leave one out).
 
     Parameters
@@ -295,13 +299,20 @@ def odd_views_out(cams, uv: np.ndarray, caddies=None) -> np.ndarray:
         their short baseline, so their agreement says nothing (a brow dot's
         blobs pulled the same way in both cameras of a caddy used to outvote
         the third camera's view and leave the point on the pulled pair).
+    sizes : numpy.ndarray, shape (N, S), optional
+        Each view's blob size (mm, :func:`.blob_size.view_sizes_mm`).  Where
+        leaving out either of several views makes the rest agree (three views,
+        two of which always fit each other), the data cannot tell which one is
+        pulled: the largest blob, by more than ``LOO_SIZE`` times the next, is
+        the one merged with something beside its dot.
 
     Returns
     -------
     numpy.ndarray of bool, shape (N, S)
         At most one view per point: the one whose leave-one-out reprojection
         error exceeds ``LOO_PX`` while the point from the other views fits
-        them within ``LOO_AGREE_PX`` (points with 3+ views only).
+        them within ``LOO_AGREE_PX`` (points with 3+ views only); of several,
+        the largest error (or the largest blob, above).
     """
     n, S = uv.shape[:2]
     seen = np.isfinite(uv[..., 0])
@@ -328,6 +339,11 @@ def odd_views_out(cams, uv: np.ndarray, caddies=None) -> np.ndarray:
             fit_err[rows[spans < 2], s] = np.inf
     cand = (out_err > LOO_PX) & (fit_err <= LOO_AGREE_PX)
     worst = np.argmax(np.where(cand, out_err, -1.0), axis=1)
+    if sizes is not None:
+        sz = np.where(cand, np.nan_to_num(np.asarray(sizes, float), nan=0.0), 0.0)
+        order = np.sort(sz, axis=1)
+        clear = (cand.sum(axis=1) >= 2) & (order[:, -1] > LOO_SIZE * order[:, -2]) & (order[:, -2] > 0)
+        worst = np.where(clear, np.argmax(sz, axis=1), worst)
     bad = np.zeros((n, S), bool)
     has = cand.any(axis=1)
     bad[np.flatnonzero(has), worst[has]] = True
