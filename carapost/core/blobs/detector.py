@@ -249,6 +249,33 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     return rescued
 
 
+#: A detection whose major axis is this many times another's, with that one's centre inside its
+#: minor semi-axis, is the other's dot measured together with what it touches.
+ENGULF = 2.0
+
+
+def _engulfing(x, y, major, minor) -> np.ndarray:
+    """Which detections hold a much smaller detection near their centre (:data:`ENGULF`).
+
+    The duplicate removal keeps one of two detections closer than half the
+    larger minor axis by score: right for one blob fitted twice, wrong for a dot
+    and a region twice its size that contains it (a white nose tip measured with
+    the nose's specular highlight), where the larger's score may be the higher.
+    """
+    out = np.zeros(len(x), bool)
+    if len(x) < 2:
+        return out
+    from scipy.spatial import cKDTree
+    pairs = cKDTree(np.column_stack([x, y])).query_pairs(float(0.5 * np.max(minor)), output_type="ndarray")
+    if len(pairs) == 0:
+        return out
+    i, j = pairs[:, 0], pairs[:, 1]
+    big, small = np.where(major[i] >= major[j], i, j), np.where(major[i] >= major[j], j, i)
+    hit = (major[big] > ENGULF * major[small]) & (np.hypot(x[big] - x[small], y[big] - y[small]) < 0.5 * minor[big])
+    out[big[hit]] = True
+    return out
+
+
 @dataclass
 class Fitted:
     """Candidates that passed stage 1, fitted (full-resolution geometry)."""
@@ -347,6 +374,7 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     ok = fitted.ok & (prob >= max(float(threshold), 1e-6))
     ok &= (fitted.major >= min_major) & (fitted.major <= max_major)
     idx = np.flatnonzero(ok)
+    idx = idx[~_engulfing(fitted.x[idx], fitted.y[idx], fitted.major[idx], fitted.minor[idx])]
     keep = idx[_dedupe(fitted.x[idx], fitted.y[idx], fitted.minor[idx], prob[idx])]
     rec = np.zeros(len(keep), DET_DTYPE)
     rec["x"], rec["y"] = fitted.x[keep], fitted.y[keep]
