@@ -25,7 +25,7 @@ from ..heap import keep_freed_memory
 from . import features as fe
 from .candidate_kernel import greedy_nms
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, measure_at, window_for
-from .edges import MERGED, REACH, edge_ellipses, refine_centres
+from .edges import MERGED, edge_ellipses, refine_centres
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
 
@@ -202,9 +202,12 @@ DRIFT = 1.0
 #: and 34 elsewhere (brow hair, lip creases, the dark outside the face) 0.40-1.0, most under 0.88;
 #: 2.4 moves 0.88 to the default threshold 0.4: 38 of the 43 are kept and 6 of the 34.
 RESCUE_LOGIT = 2.4
+#: A fit that holds its candidate and that stage 2 scores this high is not looked at again.
+RESCUE_ABOVE = 0.9
 
 
-def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, ang, ok, extra) -> np.ndarray:
+def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, ang, ok, extra,
+                    among=None) -> np.ndarray:
     """Fits drawn off their candidate's dot are replaced by the dot's own edge ellipse (in place).
 
     The intensity measurement weighs every pixel of its window, so a small dot
@@ -214,12 +217,22 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     candidate's radius.  Where that fit's own outline is not a clean ellipse
     and the candidate's is (:func:`.edges.edge_ellipses`), the candidate's
     edge ellipse is the blob; its stage-2 measurements are taken again in a
-    window about it (one solve, whose centre is not used).  Returns which fits were replaced.
+    window about it (one solve, whose centre is not used).  Only fits in ``among``
+    (all by default) are looked at.  Returns which fits were replaced.
     """
     r0 = cand.radius[sel]
-    drift = (moved > np.maximum(DRIFT * r0, 1.5)) | (0.5 * major > MERGED * r0)
+    grown = 0.5 * major > MERGED * r0
+    drift = (moved > np.maximum(DRIFT * r0, 1.5)) | grown
     # Duplicate candidates of a blob already measured (not ok after the first round's merge) stay out.
-    idx = np.flatnonzero(drift & (ok | (moved > np.maximum(np.maximum(0.5 * major, r0), 2.0))))
+    drift &= ok | (moved > np.maximum(np.maximum(0.5 * major, r0), 2.0))
+    # Only the finest octave's candidates: a dot drawn off is small, and its candidate there sits inside
+    # it (on sample frames of seeds 6-8, every rescued ellipse that became a hit came from that octave,
+    # and coarser ones were ~40 % of the edge searches).
+    if len(sel):
+        drift &= cand.level[sel] == cand.level.min()
+    if among is not None:
+        drift &= among
+    idx = np.flatnonzero(drift)
     rescued = np.zeros(len(x), bool)
     if len(idx) == 0:
         return rescued
@@ -227,11 +240,9 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     # A fit that holds its candidate may be a larger blob the candidate is part of: its own clean
     # edge says so.  One that left its candidate behind says nothing about it.
     held = np.where(moved[idx] <= 0.5 * minor[idx], major[idx], 0.0)
-    e = edge_ellipses(bright, sx, sy, r0[idx], (x[idx], y[idx], held, minor[idx], ang[idx]))
-    good = (e[:, 5] > 0) & (np.hypot(e[:, 0] - sx, e[:, 1] - sy) <= np.maximum(r0[idx], 1.5))
-    # The rays search REACH px either side of the candidate's circle: a conic much larger than that
-    # is extrapolated from an arc.
-    good &= e[:, 2] <= 2.0 * (r0[idx] + REACH) + 1.0
+    # A dot measured with the hair it touches: that side of its own edge is spoilt too (its best arc).
+    e = edge_ellipses(bright, sx, sy, r0[idx], (x[idx], y[idx], held, minor[idx], ang[idx]), grown[idx])
+    good = e[:, 5] > 0
     idx, e = idx[good], e[good]
     if len(idx) == 0:
         return rescued
@@ -292,24 +303,9 @@ class Fitted:
     from_edge: np.ndarray | None = None  #: the ellipse is the candidate's own edge (:func:`_rescue_drifted`)
 
 
-def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
-    """Stage-1 gate, suppression of duplicates, fitting, and the stage-2 features."""
-    logit1 = model.stage1.logit(cand.feats)
-    prob1 = 1.0 / (1.0 + np.exp(-np.clip(logit1, -30, 30)))
-    sel = np.flatnonzero(prob1 >= STAGE1_GATE)
-    # One blob is usually a candidate on two or three octaves: fit it once, from the
-    # finest octave's candidate (closest to the centre; coarse ones start pixels off).
-    sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
-    x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
-                                                         cand.noise)
+def _fit_features(cand: Candidates, sel, logit1, x, y, major, minor, extra, rescued) -> np.ndarray:
+    """Stage 2's inputs (:data:`~.model.FIT_FEATURE_NAMES`) of the fits of candidates ``sel``."""
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
-    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra)
-    # The centre may wander to a neighbour: the candidate must stay inside the blob found.
-    moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
-    ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)
-    ok &= minor > 0.5
-    h, w = bright.shape
-    ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
     contrast, line_rms, sharp, border_std, slope, fill, edge_share, background, core_std = extra.T
     # The skin's light at the blob: the background on the image (white blobs) or 255 less it
     # on the inverted image (black ones).
@@ -330,6 +326,34 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     F[:, 11] = np.clip(contrast / np.maximum(light, 1.0), 0, 5)
     F[:, 12] = np.clip(core_std, 0, 5)
     F[:, 13] = rescued
+    return F
+
+
+def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
+    """Stage-1 gate, suppression of duplicates, fitting, and the stage-2 features."""
+    logit1 = model.stage1.logit(cand.feats)
+    prob1 = 1.0 / (1.0 + np.exp(-np.clip(logit1, -30, 30)))
+    sel = np.flatnonzero(prob1 >= STAGE1_GATE)
+    # One blob is usually a candidate on two or three octaves: fit it once, from the
+    # finest octave's candidate (closest to the centre; coarse ones start pixels off).
+    sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
+    x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
+                                                         cand.noise)
+    moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
+    among = None
+    if model.stage2 is not None:
+        # Fits stage 2 already believes, holding their candidate, are not looked at again (the edge
+        # search costs ~50 us a candidate; most drifted candidates are coarse octaves' of a clean blob).
+        p0 = model.stage2.predict(_fit_features(cand, sel, logit1, x, y, major, minor, extra, np.zeros(len(sel))))
+        among = ~(ok & (p0 >= RESCUE_ABOVE) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
+    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among)
+    # The centre may wander to a neighbour: the candidate must stay inside the blob found.
+    moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
+    ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)
+    ok &= minor > 0.5
+    h, w = bright.shape
+    ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
+    F = _fit_features(cand, sel, logit1, x, y, major, minor, extra, rescued)
     return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F,
                   (cand.x[sel], cand.y[sel], cand.radius[sel]), rescued)
 

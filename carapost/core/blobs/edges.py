@@ -62,7 +62,7 @@ MERGED = 1.8
 ROUNDS = 3
 #: Arcs tried when the whole edge is not a clean ellipse (0: none), and the distance within which an
 #: edge point agrees with an arc's ellipse, px.
-ARCS = 12
+ARCS = 8
 INLIER = 0.35
 #: The arcs are tried only when the whole edge's conic is centred more than this far (px) from the blob.
 ARC_MOVE = 0.3
@@ -478,28 +478,32 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
 
 
 @njit(**JIT)
-def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, out):
+def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out):
     buf = np.empty((7, RAYS))
     for i in range(len(sx)):
         r0 = max(sr[i], 1.0)
         out[i, :] = 0.0
-        if fmaj[i] > 0.0:
-            # The measured blob has a clean edge of its own: it is what the candidate led to.
-            a, b = max(fmaj[i] / 2.0, 0.5), max(fmin[i] / 2.0, 0.5)
-            if _fit_edge(img, fx[i], fy[i], a, b, math.radians(fang[i]), buf)[2]:
-                continue
-        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, True)
+        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, arcs[i] > 0.0)
         if not clean:
             continue
         # The conic again on the points the last round kept, for its axes as well as its centre.
         x0, y0, ok, z = _conic_solve(buf[3], buf[4], buf[6], r0, buf[5])
         a, b, th = _conic_axes(z, x0, y0)
-        if ok and b > 0.0:
-            out[i, 0], out[i, 1] = sx[i] + x0 * r0, sy[i] + y0 * r0
-            out[i, 2], out[i, 3], out[i, 4], out[i, 5] = 2.0 * a * r0, 2.0 * b * r0, math.degrees(th), 1.0
+        # Within a candidate radius of the candidate, and no larger than the rays reach (REACH px either
+        # side of the candidate's circle: a conic much larger is extrapolated from an arc).
+        if not (ok and b > 0.0 and math.hypot(x0, y0) * r0 <= max(r0, 1.5)
+                and 2.0 * a * r0 <= 2.0 * (r0 + REACH) + 1.0):
+            continue
+        if fmaj[i] > 0.0:
+            # The measured blob has a clean edge of its own: it is what the candidate led to.
+            fa, fb = max(fmaj[i] / 2.0, 0.5), max(fmin[i] / 2.0, 0.5)
+            if _fit_edge(img, fx[i], fy[i], fa, fb, math.radians(fang[i]), buf)[2]:
+                continue
+        out[i, 0], out[i, 1] = sx[i] + x0 * r0, sy[i] + y0 * r0
+        out[i, 2], out[i, 3], out[i, 4], out[i, 5] = 2.0 * a * r0, 2.0 * b * r0, math.degrees(th), 1.0
 
 
-def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None):
+def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None):
     """Ellipses of dots found from their painted edge alone, around candidate centres.
 
     For a candidate whose intensity measurement was drawn off to a larger dark
@@ -518,19 +522,25 @@ def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None):
         ``(x, y, major, minor, angle)`` the intensity measurement found from
         each candidate: where that ellipse's own edge is clean, it is kept
         (the row is zeros).
+    arcs : array_like of bool, optional
+        Where a candidate's whole edge is not a clean ellipse, try its best arc
+        (step 5's ``_fit_arcs``; ~12 conic fits more): for dots touched by hair
+        on one side.  None: nowhere.
 
     Returns
     -------
     numpy.ndarray, shape (N, 6)
         ``x, y, major, minor, angle, clean`` per candidate (full axes, px; angle
         of the major axis, degrees); ``clean`` is 1 where the edge made a clean
-        ellipse, else the row is zeros.
+        ellipse within a candidate radius (and 1.5 px) of the candidate and no
+        larger than the rays reach, else the row is zeros.
     """
     args = [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in (x, y, radius)]
     n = len(args[0])
     if fits is None:
         fits = (np.zeros(n),) * 5
     args += [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in fits]
+    args.append(np.zeros(n) if arcs is None else np.ascontiguousarray(np.asarray(arcs, float)).reshape(-1))
     out = np.zeros((n, 6))
     if len(out):
         _from_candidates(np.ascontiguousarray(bright), *args, out)
