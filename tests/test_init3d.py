@@ -381,3 +381,35 @@ def test_of_two_views_either_of_which_explains_the_third_the_larger_blob_goes():
     # Blobs of about one size: the errors decide, as before.
     sizes[:, a] = 2.1
     assert (odd_views_out(cams, uv, caddies, sizes) == plain).all()
+
+
+def test_a_one_caddy_point_finds_the_other_caddys_view_along_its_depth():
+    """A point of one caddy's pair, 1.5 mm off along its line of sight (half-pixel errors along that pair's
+    short baseline do that), projects pixels away from its blob in the other caddy's cameras: too far for the
+    attach gate, but on the projection of its depth range, where that blob is the only detection."""
+    from carapost.core.calib.depth_attach import attach_along_depth
+    from carapost.core.calib.init3d import ATTACH_GATE_PX
+
+    sc = make_scene(35, seed=2)
+    cams = sc.cameras[0]
+    caddies = sc.project.caddies()
+    X = sc.face[0][:25]
+    xy = [c.project(X) for c in cams]
+    centre = np.mean([cams[s].position for s in caddies[1]], axis=0)
+    sight = (X - centre) / np.linalg.norm(X - centre, axis=1, keepdims=True)
+    Xoff = X + 1.5 * sight
+    pts = []
+    for k in range(len(X)):
+        uv = np.full((4, 2), np.nan)
+        det = np.full(4, -1)
+        for s in caddies[1]:
+            uv[s], det[s] = xy[s][k], k
+        pts.append({"id": None, "det": det, "uv": uv, "X": Xoff[k]})
+    miss = np.linalg.norm(cams[0].project(Xoff) - xy[0], axis=1)
+    assert np.median(miss) > ATTACH_GATE_PX           # the plain attach gate cannot take them
+    blocked = [np.zeros(len(v), bool) for v in xy]
+    attach_along_depth(pts, cams, xy, blocked, caddies)
+    got = [d["det"][0] for d in pts]
+    right = sum(g == k for k, g in enumerate(got))
+    wrong = sum(g >= 0 and g != k for k, g in enumerate(got))
+    assert wrong == 0 and right >= 20, (right, wrong)

@@ -33,6 +33,7 @@ from .blob_size import blob_sizes_mm, enlarged_pair, gross_views, view_sizes_mm
 from .bundle import bundle_cameras
 from .caddy_split import caddy_split
 from .cross_caddy import grow_across
+from .depth_attach import attach_along_depth
 from .matching import CLEAR_RATIO, unambiguous
 from .nearest import nearest_with_clearance
 
@@ -273,6 +274,7 @@ def initialize_3d(project, frame: int, params: dict | None = None):
             # The points made so far take the detections at their projections first: a two-view match
             # across the caddies is weaker evidence, and may only have what is left.
             pts = _attach_more(pts, cams, xy, blocked)
+            pts = attach_along_depth(pts, cams, xy, blocked, project.caddies())
             pts = _grow_across_caddies(pts, cams, xy, recs, blocked, project.caddies(), p["max_allowed_depth"],
                                        p["max_3d_distance_to_merge"])
             pts = _attach_more(pts, cams, xy, blocked)
