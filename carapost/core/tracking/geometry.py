@@ -128,7 +128,7 @@ def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.where(v, 1.0 / np.maximum(np.abs(depth), 1e-3), 0.0) * 100.0
 
 
-def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
+def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
     """Batched triangulation in corrected pixels.
 
     Linear least squares on the DLT equations, solved twice: the second solve
@@ -140,6 +140,10 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarra
     ----------
     uv_c : ndarray (N, S, 2)
     valid : ndarray (N, S) bool
+    weight : ndarray (N, S), optional
+        Each view's confidence, the inverse of its expected image error relative
+        to a blob's (1: a blob; less for a patch track, which lands several times
+        farther from the marker); None: all 1.
 
     Returns
     -------
@@ -154,17 +158,18 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarra
     P = rig.P()
     v = valid[ok]
     uv = np.where(v[..., None], uv_c[ok], 0.0)
-    w = v.astype(float)
+    conf = 1.0 if weight is None else weight[ok]
+    w = v * conf
     for _ in range(2):
         M, b = _view_equations(P, uv, w)
         X = _solve3(M.sum(1), b.sum(1))
-        w = _depth_weights(P, X, v)
+        w = _depth_weights(P, X, v) * conf
     out[ok] = X
     return out
 
 
 def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
-                    X: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    X: np.ndarray | None = None, weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each view's error against the point triangulated from the other views.
 
     Parameters
@@ -173,7 +178,9 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     valid : ndarray (N, S) bool
         Rows need 3+ valid views.
     X : ndarray (N, 3), optional
-        The points triangulated from all their views, when already known.
+        The points triangulated from all their views (with ``weight``), when already known.
+    weight : ndarray (N, S), optional
+        The views' confidence, as for :func:`triangulate`.
 
     Returns
     -------
@@ -186,8 +193,8 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     P = rig.P()
     uv = np.where(valid[..., None], uv_c, 0.0)
     if X is None:
-        X = triangulate(rig, uv_c, valid)
-    w = _depth_weights(P, X, valid)
+        X = triangulate(rig, uv_c, valid, weight)
+    w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
     M, b = _view_equations(P, uv, w)
     Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)             # (N, S, 3) without view s
     S = valid.shape[1]
