@@ -8,7 +8,7 @@ ground truth and fails without the rule it is named after.
 import numpy as np
 
 from carapost.core.points import SRC_DETECTION, SRC_NONE, SRC_PATCH
-from carapost.core.tracking.engine import PATCH_WEIGHT, SIZE_RATE, confidence, size_weight
+from carapost.core.tracking.engine import PATCH_WEIGHT, confidence
 from carapost.core.tracking.geometry import reprojection, triangulate
 import test_tracking
 from test_tracking_wrong_blobs import tracker_after
@@ -94,45 +94,3 @@ def test_one_blob_and_patches_follow_the_own_motion_without_neighbours(quiet):
     assert np.array_equal(T._patch_depth(rig, Xt, uv, src, measured, motion)[m], Xt[m])
     motion[m] = X[m]
     assert np.linalg.norm(T._patch_depth(rig, Xt, uv, src, measured, motion)[m] - X[m]) < 0.05
-
-
-def test_a_blob_longer_than_its_usual_size_weighs_less(quiet):
-    """A blob merged with something (0.6 px off, 40 % longer than that view's blobs on earlier frames).
-
-    Its centre is the merged shape's, so it bends a 3-view point by a share of its error while its
-    held-out error stays under the frame's limit; weighted by its growth it moves the point a
-    fraction of that.  The usual size follows the view's blobs and does not take the merged one.
-    """
-    m = 5
-    T, rig, X, src, uv, equal = third_view_off(quiet, SRC_DETECTION, 0.6, m)
-    T.view_w = np.ones(src.shape)
-    T.view_w[m, 3] = size_weight(np.array(0.4))
-    Xc, _ = T._triangulate_clean(rig, uv.copy(), src != SRC_NONE, src.copy(), None, X.copy())
-    assert np.linalg.norm(Xc[m] - X[m]) < 0.35 * np.linalg.norm(equal[m] - X[m])
-    assert size_weight(np.array([np.nan, -0.3, 0.0, 0.05]))[0] == 1.0
-    assert np.all(size_weight(np.array([-0.3, 0.0, 0.05])) == 1.0)   # usual and smaller blobs: full weight
-
-
-def test_the_usual_blob_size_follows_slow_changes_but_not_a_merge(quiet):
-    """Over a step, the tracker's per-view usual size moves towards a blob 5 % longer, not one 40 % longer."""
-    sc = quiet
-    T, rig, X, _ = tracker_after(sc)
-    T.images = None
-    usual = T.size_usual.copy()
-    recs = [sc.project.detections[s].frame(1) for s in range(rig.S)]
-    det_major = {}
-    for s in range(rig.S):
-        r = recs[s].copy()
-        r["major"] = np.where(np.arange(len(r)) % 2 == 0, 8.4, 11.2)   # 5 % and 40 % longer than 8 px
-        recs[s] = r
-        det_major[s] = r["major"]
-    res = T.step(1, recs)
-    grown = T.size_usual[..., 0] - usual[..., 0]
-    for s in range(rig.S):
-        rows = np.flatnonzero(res.det[:, s] >= 0)
-        small = rows[det_major[s][res.det[rows, s]] == 8.4]
-        big = rows[det_major[s][res.det[rows, s]] == 11.2]
-        assert len(small) and len(big)
-        assert np.allclose(grown[small, s], SIZE_RATE * 0.4, rtol=0.01)
-        assert np.allclose(grown[big, s], 0.0)
-        assert np.all(T.view_w[big, s] < 0.2) and np.all(T.view_w[small, s] == 1.0)

@@ -51,10 +51,6 @@ NARROW_MISMATCH = 2.0
 #: from the marker it lands (blob centres ~0.1-0.15 px RMS on rendered takes, patch tracks ~0.6 px: the
 #: template's own blob is often a half-hidden dot's, and the dot's look changes under the patch).
 PATCH_WEIGHT = 0.2
-#: A blob view up to this much (relative) longer than the view's usual size keeps its full weight.
-SIZE_GROWN_FREE = 0.05
-#: The usual size follows blobs within this relative change of it, by this share a frame.
-SIZE_FOLLOW, SIZE_RATE = 0.1, 0.2
 #: Held-out view errors above this many robust standard deviations of the frame's are mismatches...
 HELD_OUT_SIGMAS = 8.0
 #: ...but never below this (px), so that a frame of perfect data does not reject sub-pixel noise.
@@ -83,20 +79,9 @@ def held_out_limit(errors: np.ndarray, max_error: float) -> float:
     return float(min(max_error, max(HELD_OUT_FLOOR_PX, HELD_OUT_SIGMAS * sigma)))
 
 
-def confidence(src: np.ndarray, blob_weight=1.0) -> np.ndarray:
-    """Triangulation weight of each view of ``src`` (N, S): ``blob_weight`` for a blob, ``PATCH_WEIGHT`` for a patch."""
-    return np.where(src == SRC_PATCH, PATCH_WEIGHT, blob_weight)
-
-
-def size_weight(grown: np.ndarray) -> np.ndarray:
-    """Weight of blob views whose major axis is ``grown`` (relative) longer than the view's usual size.
-
-    A blob longer than usual has merged with something or been cut by an edge: on the rendered
-    takes blob centres 5-15 % longer than usual are 0.25 px off (RMS), 15 %+ longer 0.5-0.65 px,
-    against 0.08-0.13 px for the rest.
-    """
-    g = np.nan_to_num(grown, nan=0.0)
-    return 1.0 / (1.0 + np.maximum(0.0, g - SIZE_GROWN_FREE) / SIZE_GROWN_FREE)
+def confidence(src: np.ndarray) -> np.ndarray:
+    """Triangulation weight of each view of ``src`` (N, S): 1 for a blob, ``PATCH_WEIGHT`` for a patch."""
+    return np.where(src == SRC_PATCH, PATCH_WEIGHT, 1.0)
 
 
 def on_ray(rig: RigState, uv_c: np.ndarray, views: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -201,8 +186,6 @@ class FrameTracker:
         self.V = np.full_like(self.X, np.nan)            # velocity per frame
         self.uv_prev = np.array(uv0, float)              # raw px of the previous frame's samples
         self.size = np.array(size0, float)
-        self.size_usual = self.size.copy()               # per view: the blob size it usually has
-        self.view_w = np.ones((self.N, self.S))          # this frame's blob view weights (size_weight)
         self.brim = np.asarray(brim, float).reshape(-1, 3)
         self.prev_frame = None
         self.nb = elastic.neighbours(self.X)
@@ -392,15 +375,10 @@ class FrameTracker:
             reacquired = self._reacquire(fd, rig, X2, lost & ((det >= 0).sum(1) < 2), det, taken, limit)
         valid = det >= 0
         src[valid] = SRC_DETECTION
-        major = np.full((N, S), np.nan)
         for s in range(S):
             m = valid[:, s]
             uv_c[m, s] = fd.xy[s][det[m, s]]
             uv_raw[m, s] = fd.raw[s][det[m, s]]
-            major[m, s] = fd.size[s][det[m, s], 0]
-        # A blob longer than its view's usual size has merged with something or been cut by an edge.
-        with np.errstate(invalid="ignore", divide="ignore"):
-            self.view_w = size_weight(major / self.size_usual[..., 0] - 1.0)
         # 5. Patch tracking where no blob matched.
         if self.images is not None and self.prev_frame is not None:
             self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det)
@@ -427,7 +405,7 @@ class FrameTracker:
             uvall = np.concatenate([buv_c, uv_c[multi]])
             vall = np.concatenate([bdet >= 0, valid[multi]])
             rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
-            X = triangulate(rig, uv_c, valid, confidence(src, self.view_w))
+            X = triangulate(rig, uv_c, valid, confidence(src))
             err = reprojection(rig, X, uv_c, valid)
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
@@ -480,13 +458,6 @@ class FrameTracker:
         for s in range(S):
             m = blob[:, s]
             self.size[m, s] = fd.size[s][det[m, s]]
-        # The usual size follows slow changes (a dot turning) but not a sudden merge.
-        with np.errstate(invalid="ignore", divide="ignore"):
-            change = np.abs(self.size[..., 0] / self.size_usual[..., 0] - 1.0)
-        first = blob & ~np.isfinite(self.size_usual[..., 0])
-        near = blob & (change <= SIZE_FOLLOW)
-        self.size_usual[first] = self.size[first]
-        self.size_usual[near] += SIZE_RATE * (self.size[near] - self.size_usual[near])
         self.rig = rig
         self.prev_frame = frame
         buv_raw = np.full(buv_c.shape, np.nan)
@@ -573,7 +544,7 @@ class FrameTracker:
         held-out limit.  The held-out test runs again on a point that still has 3+ views after losing
         one, as long as each further drop brings it nearer that prediction.
         """
-        X = triangulate(rig, uv_c, valid, confidence(src, self.view_w))
+        X = triangulate(rig, uv_c, valid, confidence(src))
         err = reprojection(rig, X, uv_c, valid)
         if not self.p.remove_bad_2d_projections:
             return X, err
@@ -587,7 +558,7 @@ class FrameTracker:
             valid[bad, s] = False
             src[bad, s] = SRC_NONE
             uv_c[bad, s] = np.nan
-            X[bad] = triangulate(rig, uv_c[bad], valid[bad], confidence(src[bad], self.view_w[bad]))
+            X[bad] = triangulate(rig, uv_c[bad], valid[bad], confidence(src[bad]))
             err[bad] = reprojection(rig, X[bad], uv_c[bad], valid[bad])
         # A wrong view of a 3+-view point shares its error with the others; held out, it shows in full.
         rows = np.flatnonzero(valid.sum(1) >= 3)
@@ -620,7 +591,7 @@ class FrameTracker:
             valid[b, s] = False
             src[b, s] = SRC_NONE
             uv_c[b, s] = np.nan
-            X[b] = triangulate(rig, uv_c[b], valid[b], confidence(src[b], self.view_w[b]))
+            X[b] = triangulate(rig, uv_c[b], valid[b], confidence(src[b]))
             err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
             # A point may hold two wrong views (a drifting patch and another marker's blob): the views
             # left are judged again, against the same limit (the frame's spread of good views).
@@ -671,7 +642,7 @@ class FrameTracker:
         uv_c[b, s] = np.nan
         r = np.unique(b)
         v = src[r] != SRC_NONE
-        X[r] = triangulate(rig, uv_c[r], v, confidence(src[r], self.view_w[r]))
+        X[r] = triangulate(rig, uv_c[r], v, confidence(src[r]))
         err[r] = reprojection(rig, X[r], uv_c[r], v)
 
     def _patch_depth(self, rig, X, uv_c, src, measured, motion):
@@ -793,7 +764,7 @@ class FrameTracker:
                 for s in views:
                     v = valid[i].copy()
                     v[s] = False
-                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], confidence(src[i:i + 1], self.view_w[i:i + 1]))[0]
+                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], confidence(src[i:i + 1]))[0]
                     e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
                     d = np.linalg.norm(Xi - pred[i])
                     if d <= lim[i] and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:
