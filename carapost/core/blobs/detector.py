@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
@@ -115,7 +116,14 @@ ROUNDS = 3
 GROW = 1.15
 
 
-def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float):
+def padded(bright: np.ndarray) -> np.ndarray:
+    """``bright`` with a replicated border of the largest measurement window's half-size (``WINDOWS[-1]``)."""
+    hp = WINDOWS[-1]
+    return cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
+
+
+def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float,
+                   pad: np.ndarray | None = None):
     """Steps 3-4: centre and ellipse of each candidate; returns full-resolution (x, y, major, minor, angle, ok, extra).
 
     ``extra`` is ``(N, len(MEASURE_NAMES))`` (:func:`.centre.measure`).  Up to
@@ -125,7 +133,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     elongated blob is often two candidates (the ends of its major axis): after the
     first round, answers closer than half the larger minor axis are one blob, and
     only the one whose candidate was nearest its answer is measured on (the others
-    are not ``ok``).
+    are not ``ok``).  ``pad`` is :func:`padded` of ``bright`` when the caller has it.
     """
     n = len(x)
     out = [np.zeros(n, np.float64) for _ in range(5)]
@@ -134,7 +142,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     if n == 0:
         return (*out, ok, extra)
     hp = WINDOWS[-1]
-    pad = cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
+    pad = padded(bright) if pad is None else pad
     h, w = bright.shape
     cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
     todo = np.arange(n)
@@ -207,7 +215,7 @@ RESCUE_ABOVE = 0.9
 
 
 def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, ang, ok, extra,
-                    among=None) -> np.ndarray:
+                    among=None, pad=None) -> np.ndarray:
     """Fits drawn off their candidate's dot are replaced by the dot's own edge ellipse (in place).
 
     The intensity measurement weighs every pixel of its window, so a small dot
@@ -218,7 +226,8 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     and the candidate's is (:func:`.edges.edge_ellipses`), the candidate's
     edge ellipse is the blob; its stage-2 measurements are taken again in a
     window about it (one solve, whose centre is not used).  Only fits in ``among``
-    (all by default) are looked at.  Returns which fits were replaced.
+    (all by default) are looked at; ``pad`` is :func:`padded` of ``bright`` when the
+    caller has it.  Returns which fits were replaced.
     """
     r0 = cand.radius[sel]
     grown = 0.5 * major > MERGED * r0
@@ -247,7 +256,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     if len(idx) == 0:
         return rescued
     hp = WINDOWS[-1]
-    pad = cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
+    pad = padded(bright) if pad is None else pad
     h, w = bright.shape
     ix = np.clip(np.rint(e[:, 0]).astype(np.int64), 0, w - 1)
     iy = np.clip(np.rint(e[:, 1]).astype(np.int64), 0, h - 1)
@@ -276,7 +285,6 @@ def _engulfing(x, y, major, minor) -> np.ndarray:
     out = np.zeros(len(x), bool)
     if len(x) < 2:
         return out
-    from scipy.spatial import cKDTree
     pairs = cKDTree(np.column_stack([x, y])).query_pairs(float(0.5 * np.max(minor)), output_type="ndarray")
     if len(pairs) == 0:
         return out
@@ -337,8 +345,9 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     # One blob is usually a candidate on two or three octaves: fit it once, from the
     # finest octave's candidate (closest to the centre; coarse ones start pixels off).
     sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
+    pad = padded(bright)
     x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
-                                                         cand.noise)
+                                                         cand.noise, pad)
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     among = None
     if model.stage2 is not None:
@@ -346,7 +355,7 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
         # search costs ~50 us a candidate; most drifted candidates are coarse octaves' of a clean blob).
         p0 = model.stage2.predict(_fit_features(cand, sel, logit1, x, y, major, minor, extra, np.zeros(len(sel))))
         among = ~(ok & (p0 >= RESCUE_ABOVE) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
-    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among)
+    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among, pad)
     # The centre may wander to a neighbour: the candidate must stay inside the blob found.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)
