@@ -12,8 +12,10 @@ import threading
 import cv2
 import numpy as np
 
-from carapost.core.blobs.edges import (ARC_MOVE, ARCS, COARSE, INLIER, INNER, MAX_MOVE, MAX_SCATTER, MERGED,
-                                       MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK)
+from scipy.ndimage import map_coordinates
+
+from carapost.core.blobs.edges import (ARC_MOVE, ARCS, COARSE, FLAT, FLAT_MINOR, INLIER, INNER, INSIDE, MAX_MOVE,
+                                       MAX_SCATTER, MERGED, MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
 _PHI = np.linspace(0.0, 2.0 * np.pi, RAYS, endpoint=False)
@@ -98,7 +100,7 @@ def _conic_centres(u, v, w, scale):
     gu = 2.0 * A[:, None] * u + B[:, None] * v + D[:, None]
     gv = B[:, None] * u + 2.0 * C[:, None] * v + E[:, None]
     res = alg / np.maximum(np.hypot(gu, gv), 1e-12) * scale[:, None]
-    return x0, y0, det > 0, res
+    return x0, y0, det > 0, res, vec[:, :, 0]
 
 
 def _median_of_used(r: np.ndarray, used: np.ndarray) -> np.ndarray:
@@ -108,18 +110,95 @@ def _median_of_used(r: np.ndarray, used: np.ndarray) -> np.ndarray:
     return r[np.arange(len(r)), np.maximum((n - 1) // 2, 0)]
 
 
-def _fit_edges(gx, gy, x, y, a, b, th):
-    """Edge conic centres of many blobs: (dx, dy) in px, clean, spread, n."""
-    ex, ey, peak = _edge_points(gx, gy, x, y, a, b, th)
-    good = peak > WEAK * np.median(peak, axis=1, keepdims=True)
-    good &= peak > 0
-    scale = a
-    u, v = (ex - x[:, None]) / scale[:, None], (ey - y[:, None]) / scale[:, None]
+def _levels(img, px, py):
+    """Bilinear intensities at ``(px, py)``, positions clamped into the image (as the kernel's ``_level``)."""
+    H, W = img.shape
+    px, py = np.clip(px, 0.0, W - 1.0), np.clip(py, 0.0, H - 1.0)
+    return map_coordinates(img.astype(np.float64), [py.ravel(), px.ravel()], order=1, mode="nearest").reshape(px.shape)
+
+
+def _drop_unpainted(img, x, y, a, b, th, ex, ey, peak):
+    """``edges._drop_unpainted`` for many blobs: zero the peaks of rays with no paint just inside their edge."""
+    q = np.arange(8) * np.pi / 4.0
+    ux, uy = 0.35 * a[:, None] * np.cos(q), 0.35 * b[:, None] * np.sin(q)
+    ca, sa = np.cos(th)[:, None], np.sin(th)[:, None]
+    px = np.concatenate([x[:, None], x[:, None] + ca * ux - sa * uy], axis=1)
+    py = np.concatenate([y[:, None], y[:, None] + sa * ux + ca * uy], axis=1)
+    core = np.median(_levels(img, px, py), axis=1)[:, None]
+    ex, ey = ex.astype(float), ey.astype(float)
+    dx, dy = ex - x[:, None], ey - y[:, None]
+    r = np.hypot(dx, dy)
+    rs = np.maximum(r, 1e-12)
+    dx, dy = dx / rs, dy / rs
+    d = np.minimum(INSIDE, 0.5 * r)
+    inside = _levels(img, ex - dx * d, ey - dy * d)
+    outside = _levels(img, ex + dx * INSIDE, ey + dy * INSIDE)
+    valid = (peak > 0) & (r >= 1e-6) & (core - outside > 0)
+    ratio = np.where(valid, (core - inside) / np.where(valid, core - outside, 1.0), np.nan)
+    enough = valid.sum(axis=1) >= MIN_RAYS * RAYS
+    usual = np.full(len(x), np.inf)
+    if enough.any():
+        usual[enough] = np.nanmedian(ratio[enough], axis=1)
+    drop = valid & (ratio > usual[:, None] + FLAT)
+    return np.where(drop, 0.0, peak)
+
+
+def _conic_axes(z, x0, y0):
+    """``edges._conic_axes`` for many conics: semi-axes and angle; zeros where not a real ellipse."""
+    z = np.where((z[:, 0] + z[:, 2] < 0)[:, None], -z, z)
+    A, B, C, D, E, F = z.T
+    f0 = A * x0 * x0 + B * x0 * y0 + C * y0 * y0 + D * x0 + E * y0 + F
+    mean, half = 0.5 * (A + C), np.hypot(0.5 * (A - C), 0.5 * B)
+    l1, l2 = mean - half, mean + half
+    real = (l1 * l2 > 0) & (f0 * l1 < 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a, b = np.sqrt(np.where(real, -f0 / l1, 0.0)), np.sqrt(np.where(real, -f0 / l2, 0.0))
+    return a, b, np.where(real, 0.5 * np.arctan2(B, A - C) + 0.5 * np.pi, 0.0)
+
+
+def _robust(u, v, good, scale):
+    """Step 5.3 for many blobs: three rounds of the conic, dropping points three robust deviations off."""
     w = good.astype(float)
     for _ in range(3):
-        x0, y0, ok, res = _conic_centres(u, v, w, scale)
+        x0, y0, ok, res, _z = _conic_centres(u, v, w, scale)
         spread = 1.4826 * _median_of_used(np.abs(res), w > 0) + 0.02
         w = (good & (np.abs(res) < 3.0 * spread[:, None])).astype(float)
+    return x0, y0, ok, spread, w
+
+
+def _fit_edges(gx, gy, x, y, a, b, th, flat_img=None, mode=1):
+    """Edge conic centres of many blobs: (dx, dy) in px, clean, spread, n.
+
+    ``flat_img``: the image of the flat-paint test; ``mode`` 1 tests about the given ellipses, 2 about the
+    ellipses first fitted (as the kernel's ``flat`` argument).
+    """
+    ex, ey, peak = _edge_points(gx, gy, x, y, a, b, th)
+    lim = WEAK * np.median(peak, axis=1, keepdims=True)
+    test = flat_img is not None and FLAT > 0
+    if test and mode == 1:
+        wide = b >= FLAT_MINOR
+        if wide.any():
+            peak[wide] = _drop_unpainted(flat_img, x[wide], y[wide], a[wide], b[wide], th[wide], ex[wide], ey[wide],
+                                         peak[wide])
+    scale = a
+    u, v = (ex - x[:, None]) / scale[:, None], (ey - y[:, None]) / scale[:, None]
+    good = (peak > lim) & (peak > 0)
+    x0, y0, ok, spread, w = _robust(u, v, good, scale)
+    if test and mode == 2:
+        _x, _y, ok2, _r, z = _conic_centres(u, v, w, scale)
+        fa, fb, fth = _conic_axes(z, _x, _y)
+        wide = np.flatnonzero(ok & ok2 & (fb * scale >= FLAT_MINOR))
+        if len(wide):
+            s = scale[wide]
+            new = _drop_unpainted(flat_img, x[wide] + _x[wide] * s, y[wide] + _y[wide] * s, fa[wide] * s, fb[wide] * s,
+                                  fth[wide], ex[wide], ey[wide], peak[wide])
+            again = wide[(new != peak[wide]).any(axis=1)]
+            peak[wide] = new
+            good = (peak > lim) & (peak > 0)
+            if len(again):
+                r = _robust(u[again], v[again], good[again], scale[again])
+                for arr, val in zip((x0, y0, ok, spread, w), r):
+                    arr[again] = val
     dx, dy = x0 * scale, y0 * scale
     n = w.sum(axis=1)
     clean = ok & (n >= MIN_RAYS * RAYS) & (spread < MAX_SCATTER) & (np.hypot(dx, dy) < MAX_MOVE * b)
@@ -139,14 +218,14 @@ def _fit_arcs(u, v, good, scale, b):
     for j in range(ARCS):
         s0 = (j * RAYS) // ARCS
         w = good & (((k - s0) % RAYS) < span)
-        _x0, _y0, ok, res = _conic_centres(u, v, w.astype(float), scale)
+        _x0, _y0, ok, res, _z = _conic_centres(u, v, w.astype(float), scale)
         agree[j] = np.where(ok, (good & (np.abs(res) < INLIER)).sum(axis=1), -1.0)
     # The first arc with the most agreeing points, as the kernel's strict ``>`` picks.
     best = np.argmax(agree, axis=0)
     s0 = (best * RAYS) // ARCS
     w = good & (((k[None, :] - s0[:, None]) % RAYS) < span)
     for _ in range(3):
-        x0, y0, ok, res = _conic_centres(u, v, w.astype(float), scale)
+        x0, y0, ok, res, _z = _conic_centres(u, v, w.astype(float), scale)
         w = good & (np.abs(res) < INLIER)
     n = w.sum(axis=1).astype(float)
     spread = 1.4826 * _median_of_used(np.abs(res), w) + 0.02
@@ -155,7 +234,7 @@ def _fit_arcs(u, v, good, scale, b):
     return dx, dy, clean, spread, n
 
 
-def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False):
     """:func:`carapost.core.blobs.edges.refine_centres`, in numpy (same arguments and results)."""
     x = np.asarray(x, float).copy()
     y = np.asarray(y, float).copy()
@@ -165,7 +244,8 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
     b = np.maximum(np.asarray(minor, float) / 2.0, 0.5)
     th = np.deg2rad(np.asarray(angle, float))
     gx, gy = _gradients(bright)
-    dx, dy, clean, spread, n = _fit_edges(gx, gy, x, y, a, b, th)
+    flat_img = bright if flat else None
+    dx, dy, clean, spread, n = _fit_edges(gx, gy, x, y, a, b, th, flat_img)
     shift = np.hypot(dx, dy)
     # The edge points' scatter over the square root of their number: the standard error of the fit's
     # centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
@@ -178,7 +258,8 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
         retry = np.flatnonzero(~clean & (sr > 0) & (a > MERGED * sr))
         if len(retry):
             r0 = np.maximum(sr[retry], 1.0)
-            dx2, dy2, clean2, _s, _n = _fit_edges(gx, gy, sx[retry], sy[retry], r0, r0, np.zeros(len(retry)))
+            dx2, dy2, clean2, _s, _n = _fit_edges(gx, gy, sx[retry], sy[retry], r0, r0, np.zeros(len(retry)), flat_img,
+                                                  mode=2)
             got = retry[clean2]
             x[got], y[got] = sx[got] + dx2[clean2], sy[got] + dy2[clean2]
             share[got] = 1.0

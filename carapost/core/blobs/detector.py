@@ -250,7 +250,8 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     # edge says so.  One that left its candidate behind says nothing about it.
     held = np.where(moved[idx] <= 0.5 * minor[idx], major[idx], 0.0)
     # A dot measured with the hair it touches: that side of its own edge is spoilt too (its best arc).
-    e = edge_ellipses(bright, sx, sy, r0[idx], (x[idx], y[idx], held, minor[idx], ang[idx]), grown[idx])
+    e = edge_ellipses(bright, sx, sy, r0[idx], (x[idx], y[idx], held, minor[idx], ang[idx]), grown[idx],
+                      flat=not cand.white)
     good = e[:, 5] > 0
     idx, e = idx[good], e[good]
     if len(idx) == 0:
@@ -416,7 +417,7 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     at = np.searchsorted(keep, again)
     rec["x"][at], rec["y"][at], _ = refine_centres(bright, fitted.x[again], fitted.y[again], fitted.major[again],
                                                    fitted.minor[again], fitted.angle[again],
-                                                   tuple(v[again] for v in fitted.start))
+                                                   tuple(v[again] for v in fitted.start), flat=not white)
     rec["major"], rec["minor"], rec["angle"] = fitted.major[keep], fitted.minor[keep], fitted.angle[keep]
     rec["score"] = prob[keep]
     rec["color"] = COLOR_WHITE if white else COLOR_BLACK

@@ -12,7 +12,11 @@ is measured again here from its outline (docs/blobs.md, step 5):
    Sobel gradient (bicubic between pixels) is sampled every ``STEP`` px for
    ``REACH`` px either side; its maximum, refined by a parabola, is an edge point;
 2. rays whose peak is weak (under ``WEAK`` of the blob's median peak: a gap in
-   the edge, a brow hair or a neighbouring feature) are left out;
+   the edge, a brow hair or a neighbouring feature) are left out; so are, for
+   black dots (whose paint is flat), rays with no paint just inside their edge
+   point: ``INSIDE`` px in, the level falls short of the dot's by ``FLAT`` of the
+   edge's height more than on the dot's median ray (brow hair lighter than the
+   paint but darker than the skin, whose outer edge is the ray's steepest);
 3. a conic is fitted to the edge points (least squares), three times, dropping
    points more than three robust deviations off the last fit; its centre is
    the edge's centre.
@@ -66,6 +70,12 @@ ARCS = 8
 INLIER = 0.35
 #: The arcs are tried only when the whole edge's conic is centred more than this far (px) from the blob.
 ARC_MOVE = 0.3
+#: With flat paint (black dots), a ray is dropped when the level INSIDE px inside its edge point falls
+#: short of the dot's by FLAT of the edge's height more than the dot's median ray does (0: no test).
+FLAT = 0.05
+INSIDE = 1.5
+#: ... on dots whose fitted minor semi-axis is at least this (px): a thinner one is blurred right through.
+FLAT_MINOR = 2.0
 
 _SAMPLES = int(round(2 * REACH / STEP)) + 1
 #: The coarse search's step, in samples.
@@ -340,19 +350,68 @@ def _median_of_used(r, w):
 
 
 @njit(**JIT)
-def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False):
-    """Steps 5.1-5.3 for one blob from the ellipse ``(cx, cy, a, b, th)``.
+def _level(img, px, py):
+    """Bilinear intensity of ``img`` at ``(px, py)`` (edges replicated)."""
+    H, W = img.shape
+    px = min(max(px, 0.0), W - 1.0)
+    py = min(max(py, 0.0), H - 1.0)
+    ix, iy = min(int(px), W - 2), min(int(py), H - 2)
+    fx, fy = px - ix, py - iy
+    return ((1 - fx) * (1 - fy) * img[iy, ix] + fx * (1 - fy) * img[iy, ix + 1]
+            + (1 - fx) * fy * img[iy + 1, ix] + fx * fy * img[iy + 1, ix + 1])
 
-    Returns ``(dx, dy, clean, spread, n)``: the edge conic's centre less
-    ``(cx, cy)`` in px, whether the edge is a clean ellipse, the points' robust
-    scatter (px) and how many points the last fit kept.
+
+@njit(**JIT)
+def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
+    """Zero the peak of rays with no paint just inside their edge point (step 5.2, flat paint only).
+
+    Black paint is flat: just inside a dot's edge the image is at the dot's own
+    level, whatever the light.  A black dot touching a region darker than the
+    skin but lighter than the paint (brow hair) has its edge there, and the ray's
+    steepest fall is the region's outer edge, farther out: inside that point the
+    level is the region's.  A ray whose level ``INSIDE`` px in falls short of the
+    dot's by ``FLAT`` of its edge's height more than the dot's usual ray is dropped.
     """
-    ex, ey, peak, u, v, res, w = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
-    _edge_points(img, cx, cy, a, b, th, ex, ey, peak)
-    lim = WEAK * np.median(peak)
+    ca, sa = math.cos(th), math.sin(th)
+    vals = np.empty(9)
+    vals[0] = _level(img, cx, cy)
+    for j in range(8):
+        c, s = math.cos(j * math.pi / 4.0), math.sin(j * math.pi / 4.0)
+        ux, uy = 0.35 * a * c, 0.35 * b * s
+        vals[j + 1] = _level(img, cx + ca * ux - sa * uy, cy + sa * ux + ca * uy)
+    core = np.median(vals)
+    m = 0
     for k in range(RAYS):
-        w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 else 0.0
-        u[k], v[k] = (ex[k] - cx) / a, (ey[k] - cy) / a
+        ratio[k] = np.nan
+        if peak[k] <= 0.0:
+            continue
+        dx, dy = ex[k] - cx, ey[k] - cy
+        r = math.hypot(dx, dy)
+        if r < 1e-6:
+            continue
+        dx, dy = dx / r, dy / r
+        inside = _level(img, ex[k] - dx * min(INSIDE, 0.5 * r), ey[k] - dy * min(INSIDE, 0.5 * r))
+        outside = _level(img, ex[k] + dx * INSIDE, ey[k] + dy * INSIDE)
+        if core - outside > 0.0:
+            ratio[k] = (core - inside) / (core - outside)
+            m += 1
+    if m < MIN_RAYS * RAYS:
+        return 0
+    usual = np.nanmedian(ratio)
+    dropped = 0
+    for k in range(RAYS):
+        if ratio[k] > usual + FLAT:
+            peak[k] = 0.0
+            dropped += 1
+    return dropped
+
+
+@njit(**JIT)
+def _robust_conic(u, v, w, peak, lim, a, res):
+    """Step 5.3: the conic fitted up to ``ROUNDS`` times, dropping points three robust deviations off.
+
+    Updates the weights ``w`` and residuals ``res``; returns ``(x0, y0, ok, spread)``.
+    """
     x0 = y0 = 0.0
     ok = False
     spread = np.inf
@@ -366,6 +425,35 @@ def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False):
             w[k] = wk
         if same:
             break       # the same points: another round would fit the same conic
+    return x0, y0, ok, spread
+
+
+@njit(**JIT)
+def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False, flat=0):
+    """Steps 5.1-5.3 for one blob from the ellipse ``(cx, cy, a, b, th)``.
+
+    Returns ``(dx, dy, clean, spread, n)``: the edge conic's centre less
+    ``(cx, cy)`` in px, whether the edge is a clean ellipse, the points' robust
+    scatter (px) and how many points the last fit kept.
+    """
+    ex, ey, peak, u, v, res, w = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
+    _edge_points(img, cx, cy, a, b, th, ex, ey, peak)
+    lim = WEAK * np.median(peak)
+    if flat == 1 and FLAT > 0.0 and b >= FLAT_MINOR:
+        _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, buf[7])
+    for k in range(RAYS):
+        w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 else 0.0
+        u[k], v[k] = (ex[k] - cx) / a, (ey[k] - cy) / a
+    x0, y0, ok, spread = _robust_conic(u, v, w, peak, lim, a, res)
+    if flat == 2 and FLAT > 0.0 and ok:
+        # The flat-paint test, about the ellipse just fitted; again without the rays it drops.
+        _x, _y, ok2, z = _conic_solve(u, v, w, a, res)
+        fa, fb, fth = _conic_axes(z, _x, _y)
+        if ok2 and fb * a >= FLAT_MINOR and _drop_unpainted(img, cx + _x * a, cy + _y * a, fa * a, fb * a, fth,
+                                                             ex, ey, peak, buf[7]) > 0:
+            for k in range(RAYS):
+                w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 else 0.0
+            x0, y0, ok, spread = _robust_conic(u, v, w, peak, lim, a, res)
     n = w.sum()
     dx, dy = x0 * a, y0 * a
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
@@ -420,12 +508,12 @@ def _fit_arcs(u, v, peak, lim, a, b, buf):
 
 
 @njit(**JIT)
-def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share):
-    buf = np.empty((7, RAYS))
+def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share, flat):
+    buf = np.empty((8, RAYS))
     for i in range(len(x)):
         a, b = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5)
         ox[i], oy[i], share[i] = x[i], y[i], 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, True)
+        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, True, 1 if flat else 0)
         if clean:
             # The edge points' scatter over the square root of their number: the standard error of the
             # fit's centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
@@ -438,12 +526,12 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share):
             # Measured much larger than its candidate and no clean edge: the dot was measured together
             # with a darker region it touches.  Its own edge, from the candidate (inside the dot).
             r0 = max(sr[i], 1.0)
-            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, True)
+            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, True, 2 if flat else 0)
             if clean:
                 ox[i], oy[i], share[i] = sx[i] + dx, sy[i] + dy, 1.0
 
 
-def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False):
     """Centres of blobs measured again from their edges.
 
     Parameters
@@ -458,6 +546,10 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
         ``(x, y, radius)`` of each blob's candidate: where a blob measured
         more than ``MERGED`` times its candidate's radius has no clean edge,
         its edge is looked for around the candidate instead.
+    flat : bool
+        The blobs are black paint (flat): rays with no paint just inside their
+        edge point are left out (step 5.2; on ellipses with a minor semi-axis of
+        ``FLAT_MINOR`` px or more).
 
     Returns
     -------
@@ -473,17 +565,17 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None):
     args += [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in start]
     ox, oy, share = np.empty(n), np.empty(n), np.empty(n)
     if n:
-        _refine(np.ascontiguousarray(bright), *args, ox, oy, share)
+        _refine(np.ascontiguousarray(bright), *args, ox, oy, share, bool(flat))
     return ox, oy, share > 0
 
 
 @njit(**JIT)
-def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out):
-    buf = np.empty((7, RAYS))
+def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat):
+    buf = np.empty((8, RAYS))
     for i in range(len(sx)):
         r0 = max(sr[i], 1.0)
         out[i, :] = 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, arcs[i] > 0.0)
+        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, arcs[i] > 0.0, 2 if flat else 0)
         if not clean:
             continue
         # The conic again on the points the last round kept, for its axes as well as its centre.
@@ -497,13 +589,13 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out):
         if fmaj[i] > 0.0:
             # The measured blob has a clean edge of its own: it is what the candidate led to.
             fa, fb = max(fmaj[i] / 2.0, 0.5), max(fmin[i] / 2.0, 0.5)
-            if _fit_edge(img, fx[i], fy[i], fa, fb, math.radians(fang[i]), buf)[2]:
+            if _fit_edge(img, fx[i], fy[i], fa, fb, math.radians(fang[i]), buf, False, 1 if flat else 0)[2]:
                 continue
         out[i, 0], out[i, 1] = sx[i] + x0 * r0, sy[i] + y0 * r0
         out[i, 2], out[i, 3], out[i, 4], out[i, 5] = 2.0 * a * r0, 2.0 * b * r0, math.degrees(th), 1.0
 
 
-def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None):
+def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=False):
     """Ellipses of dots found from their painted edge alone, around candidate centres.
 
     For a candidate whose intensity measurement was drawn off to a larger dark
@@ -526,6 +618,9 @@ def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None):
         Where a candidate's whole edge is not a clean ellipse, try its best arc
         (step 5's ``_fit_arcs``; ~12 conic fits more): for dots touched by hair
         on one side.  None: nowhere.
+    flat : bool
+        Black paint: the flat-paint test of step 5.2, about the ellipse first
+        fitted to each candidate's edge.
 
     Returns
     -------
@@ -543,5 +638,5 @@ def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None):
     args.append(np.zeros(n) if arcs is None else np.ascontiguousarray(np.asarray(arcs, float)).reshape(-1))
     out = np.zeros((n, 6))
     if len(out):
-        _from_candidates(np.ascontiguousarray(bright), *args, out)
+        _from_candidates(np.ascontiguousarray(bright), *args, out, bool(flat))
     return out
