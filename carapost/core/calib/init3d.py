@@ -29,7 +29,7 @@ from ..commands import CompoundCommand
 from ..edits import AddPoints, SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, FACE, SRC_DETECTION, SRC_NONE, ST_NONE, ST_RECONSTRUCTED
-from .blob_size import blob_sizes_mm, enlarged_pair, gross_views, view_sizes_mm
+from .blob_size import blob_sizes_mm, enlarged_pair, gross_views, pulled_views, view_sizes_mm
 from .bundle import bundle_cameras
 from .caddy_split import caddy_split
 from .cross_caddy import grow_across
@@ -262,9 +262,14 @@ def initialize_3d(project, frame: int, params: dict | None = None):
         split = caddy_split(cams, uv, sizes, project.caddies())
         # Leave-one-out would judge the kept caddy's views against the pulled pair's.
         loo = odd_views_out(cams, uv, project.caddies(), sizes) & ~split.any(axis=1, keepdims=True)
+        pulled = _pulled(sizes, project.caddies()) & ~(loo | split).any(axis=1, keepdims=True)
         for k, d in enumerate(pts):
             bad = (np.isfinite(err[k]) & (err[k] > REJECT_PX)) | loo[k] | split[k]
             if d["id"] is None:     # seeds keep what the user attached
+                bad |= pulled[k]
+                for s in np.flatnonzero(pulled[k]):
+                    # Not attached again at the point's projection: it lies within the attach gate.
+                    blocked[s][d["det"][s]] = True
                 d["uv"][bad] = np.nan
                 d["det"][bad] = -1
         pts = [d for d in pts if d["id"] is not None or np.count_nonzero(np.isfinite(d["uv"][:, 0])) >= 2]
@@ -448,6 +453,14 @@ def _drop_merged_blobs(pts, cams, recs, blocked):
             d["X"] = triangulate_many(cams, d["uv"][None])[0]
         keep.append(d)
     return keep
+
+
+def _pulled(sizes, caddies):
+    """:func:`.blob_size.pulled_views` of the points whose view sizes (mm) are ``sizes`` (N, S)."""
+    typical = np.nanmedian(sizes) if np.any(np.isfinite(sizes)) else np.nan
+    if not typical > 0:
+        return np.zeros(sizes.shape, bool)
+    return pulled_views(sizes / typical, caddies, LOO_SIZE)
 
 
 def _drop_enlarged_pairs(pts, cams, recs):
