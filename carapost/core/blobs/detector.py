@@ -212,6 +212,9 @@ DRIFT = 1.0
 RESCUE_LOGIT = 2.4
 #: A fit that holds its candidate and that stage 2 scores this high is not looked at again.
 RESCUE_ABOVE = 0.9
+#: A fit whose semi-major axis is this many times its candidate's radius was drawn off its dot (it took in what
+#: the dot touches) when its own edge says so.
+GROWN = 1.5
 
 
 def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, ang, ok, extra,
@@ -230,7 +233,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     caller has it.  Returns which fits were replaced.
     """
     r0 = cand.radius[sel]
-    grown = 0.5 * major > MERGED * r0
+    grown = 0.5 * major > GROWN * r0
     drift = (moved > np.maximum(DRIFT * r0, 1.5)) | grown
     # Duplicate candidates of a blob already measured (not ok after the first round's merge) stay out.
     drift &= ok | (moved > np.maximum(np.maximum(0.5 * major, r0), 2.0))
