@@ -4,6 +4,8 @@ Each test rebuilds, on one frame of a synthetic take with ground truth, a situat
 point of ``carapost sample --markers 156 --seed 0`` (300 frames) jump onto the next marker's dot
 while the jaw was open; each fails without the rule it is named after.
 """
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -161,3 +163,38 @@ def test_a_patch_beside_one_blob_needs_something_to_check_it(quiet):
     assert run(here) == SRC_NONE                                     # 6 px: millimetres off its motion
     uv[m, 0] -= (6.0, 0.0)
     assert run(here) == SRC_PATCH                                    # where it moves to: kept
+
+
+@pytest.mark.parametrize("off_mm,kept", [(0.0, True), (3.0, True), (6.0, False)])
+def test_a_point_back_from_a_loss_is_held_to_where_it_was_last_seen(quiet, off_mm, kept):
+    """Chin_R_11, frame 193 of the backwards run: lost for a frame, back on a wrong wide pair, 21 mm off.
+
+    Its neighbours were lost too, and a point lost on the previous frame has no motion to be
+    checked against: nothing held it.  It is now held to where it was last seen, within Max
+    Allowed 3D Point Error (2 mm here) per frame since: two frames, 4 mm.
+    """
+    T, rig, X, raw = tracker_after(quiet)
+    T.p = dataclasses.replace(T.p, max_allowed_3d_point_error=2.0)
+    m = 3
+    nb = T.nb[m]
+    wide = [1, 3]
+    T.X[m] = np.nan                                 # lost on the previous frame, seen the one before
+    T.V[m] = np.nan
+    T.unseen[m] = 1
+    u = np.cross(X[m] - rig.C[1], X[m] - rig.C[3])
+    Xb = X[m] + off_mm * u / np.linalg.norm(u)
+    moved = rig.project(Xb[None])[0]
+    raw2 = raw.copy()
+    for s in wide:
+        raw2[m, s] = rig.cameras[s].distort(moved[s])
+    assert np.all(np.linalg.norm(raw2[m, wide] - raw[m, wide], axis=1) < TrackingParams().face_point_tracking_distance)
+    present = np.ones(raw.shape[:2], bool)
+    present[nb] = False
+    present[m] = False
+    present[m, wide] = True
+    recs, _ = recs_from(raw2, present)
+    r = T.step(1, recs)
+    if kept:
+        assert r.status[m] != ST_NONE and np.linalg.norm(r.X[m] - Xb) < 0.1
+    else:
+        assert r.status[m] == ST_NONE, np.linalg.norm(r.X[m] - X[m])

@@ -38,6 +38,9 @@ PATCH_AGREE_PX = 1.5
 PATCH_3D_MM = 2.0
 #: A patch track this close (px) to a blob another point holds on the same frame is rejected.
 PATCH_ON_BLOB_PX = 3.0
+#: A lost point no neighbour predicts may be this many Max Allowed 3D Point Errors from where it was last
+#: seen (one per frame since, at most this many).
+LAST_SEEN_FRAMES = 4
 #: Depth error (mm per px of image error) above which a point's views are too close together to
 #: fix its depth (two cameras on one side of the rig, ~10 degrees apart: ~2 mm/px; across: ~0.7).
 NARROW_MM_PER_PX = 1.2
@@ -195,6 +198,7 @@ class FrameTracker:
         meas = np.all(np.isfinite(self.X), axis=1)
         elastic.update_offsets(self.off, self.nb, self.X, meas)
         self.X_last = self.X.copy()
+        self.unseen = np.where(meas, 0, LAST_SEEN_FRAMES)  # frames since each point last had a position
         self.patch_run = np.zeros(self.N, int)           # frames in a row without a blob in any view
         # Each view's last blob sample (frame, raw px): patches are matched against the marker's
         # look there, not against the previous frame's patch, so that they cannot drift step by step.
@@ -417,7 +421,13 @@ class FrameTracker:
             # (Two views of a wide pair meet whatever the blobs when one lies near the other's epipolar
             # line: a chin dot's view took the next chin dot's blob, 20 px away, and passed 20 mm off.)
             pred = np.where(np.isfinite(pred), pred, motion)
-            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back, pred)
+            # A point back after a loss that no neighbour can predict (most of a grazing chin lost) is
+            # held to where it was last seen, within the limit per frame since: a chin dot's patch slid
+            # onto the next dot's place, met a wide pair's blob and put it 21 mm off, unchecked.
+            alone = lost & ~np.all(np.isfinite(pred), axis=1)
+            pred[alone] = Xp[alone]
+            reach = np.where(alone, np.minimum(self.unseen + 1, LAST_SEEN_FRAMES), 1)
+            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back, pred, reach)
             valid = src != SRC_NONE
         # 8. Single-sensor tracking of points seen by one sensor only.
         status = np.where(measured, ST_RECONSTRUCTED, ST_NONE).astype(np.uint8)
@@ -447,6 +457,7 @@ class FrameTracker:
         self.V = np.where(have[:, None] & tracked[:, None], X - self.X, np.nan)
         self.X = X.copy()
         self.X_last[have] = X[have]
+        self.unseen = np.where(have, 0, self.unseen + 1)
         # A clamped depth is the prediction's, not a measurement: refreshing the offsets with it would
         # let a biased pair walk the point away by the clamp distance every frame.
         elastic.update_offsets(self.off, self.nb, X, (status == ST_RECONSTRUCTED) & ~clamped, self.motion)
@@ -746,14 +757,15 @@ class FrameTracker:
         spread = 1.4826 * np.take_along_axis(dev, order, 1)[np.arange(len(rows)), half]
         return np.where(np.isfinite(spread) & (cw[:, -1] > 0), spread, 0.0)
 
-    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back, pred):
+    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back, pred, reach=1):
         """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction.
 
         ``back`` rows (lost on the previous frame, now seen by 3+ agreeing cameras) get twice the
         limit: their neighbour offsets date from before they were lost, so the prediction is what
-        is stale, not the point.  ``pred`` is the neighbours' prediction of every point.
+        is stale, not the point.  ``pred`` is the neighbours' prediction of every point; ``reach`` (per
+        point) multiplies the limit where ``pred`` is where the point was last seen, frames ago.
         """
-        lim = np.where(back, 2.0, 1.0) * float(self.p.max_allowed_3d_point_error)
+        lim = np.where(back, 2.0, 1.0) * reach * float(self.p.max_allowed_3d_point_error)
         dev = np.linalg.norm(X - pred, axis=1)
         bad = np.flatnonzero(measured & np.isfinite(dev) & (dev > lim))
         for i in bad.tolist():
