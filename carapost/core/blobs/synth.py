@@ -250,7 +250,8 @@ def disc_image(rng, size=41, radius=4.0, blur=1.0, amplitude=100.0, background=6
 
 
 def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int = 40, markers: int = 100,
-                  noise: float | None = None, blur: float | None = None, cameras=(0, 1, 2, 3)) -> list[SynthImage]:
+                  noise: float | None = None, blur: float | None = None, cameras=(0, 1, 2, 3),
+                  jaw_open: int = 0, take_frames: int = 120) -> list[SynthImage]:
     """Frames of a ``carapost sample`` take (all its cameras), rendered in memory, with their truth.
 
     The same renderer as ``carapost sample`` (:mod:`carapost.sample`): a face with
@@ -274,16 +275,29 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
         Sensor noise (grey levels) and optical blur (px); the sample's defaults if omitted.
     cameras : sequence of int
         Which of the four cameras.
+    jaw_open : int
+        Instead of ``frames`` and ``step``: this many frames of a ``take_frames``-frame take where
+        the jaw is open widest (its lower-lip and chin dots seen at grazing angles in the
+        jaw's shadow, beside the teeth), each a frame apart from the next.
     """
     # Imported here: the renderer is a consumer of the core, not a part of it.
     from carapost.sample.render import leds_of, render_view
     from carapost.sample.scene import build_scene, frame_geometry, true_cameras
 
     kw = {k: float(v) for k, v in (("noise", noise), ("blur", blur)) if v is not None}
-    sc = build_scene(markers=markers, frames=max(1, (frames - 1) * step + 1), seed=seed, white=white, **kw)
+    length = int(take_frames) if jaw_open else max(1, (frames - 1) * step + 1)
+    sc = build_scene(markers=markers, frames=length, seed=seed, white=white, **kw)
     labels = np.array(list(sc.markers.labels) + [f"Brim_{i}" for i in range(sc.n_brim)])
     out = []
-    for f in range(0, frames * step, step):
+    if jaw_open:
+        from carapost.sample.face import EXPRESSIONS
+
+        jaw = sc.motion.weights[:, EXPRESSIONS.index("jaw_open")]
+        widest = int(np.argmax(jaw))
+        which = [min(max(widest + k - jaw_open // 2, 0), length - 1) for k in range(int(jaw_open))]
+    else:
+        which = range(0, frames * step, step)
+    for f in which:
         g = frame_geometry(sc, f)
         cams = true_cameras(sc, f)
         for c in cameras:
