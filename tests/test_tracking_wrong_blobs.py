@@ -43,6 +43,25 @@ def recs_from(raw, present):
     return recs, index
 
 
+def seen_by_a_wide_pair_only(T, rig, X, raw, m, off_mm):
+    """Detections where point ``m``, ``off_mm`` from ``X[m]``, is seen by cameras 1 and 3 only and its
+    neighbours by nobody (a grazing chin).  Moved across both cameras' rays, its blobs stay within the
+    Face Point Tracking Distance.  Returns ``(recs, the point's position)``."""
+    wide = [1, 3]
+    u = np.cross(X[m] - rig.C[1], X[m] - rig.C[3])
+    Xb = X[m] + off_mm * u / np.linalg.norm(u)
+    moved = rig.project(Xb[None])[0]
+    raw2 = raw.copy()
+    for s in wide:
+        raw2[m, s] = rig.cameras[s].distort(moved[s])
+    assert np.all(np.linalg.norm(raw2[m, wide] - raw[m, wide], axis=1) < TrackingParams().face_point_tracking_distance)
+    present = np.ones(raw.shape[:2], bool)
+    present[T.nb[m]] = False
+    present[m] = False
+    present[m, wide] = True
+    return recs_from(raw2, present)[0], Xb
+
+
 def nearest_pair(rig, X, s):
     """Two markers whose images in camera ``s`` lie closest together (m, n)."""
     uv = rig.project(X)[:, s]
@@ -94,22 +113,7 @@ def test_a_point_without_neighbours_is_checked_against_its_own_motion(quiet, off
     """
     T, rig, X, raw = tracker_after(quiet)
     m = 3
-    nb = T.nb[m]
-    wide = [1, 3]
-    # The blobs of a point 7 mm off, seen by a wide pair only; its neighbours seen by nobody.
-    u = np.cross(X[m] - rig.C[1], X[m] - rig.C[3])
-    Xb = X[m] + off_mm * u / np.linalg.norm(u)
-    moved = rig.project(Xb[None])[0]
-    raw2 = raw.copy()
-    for s in wide:
-        raw2[m, s] = rig.cameras[s].distort(moved[s])
-    assert np.all(np.linalg.norm(raw2[m, wide] - raw[m, wide], axis=1) < TrackingParams().face_point_tracking_distance)
-    present = np.ones(raw.shape[:2], bool)
-    present[nb] = False
-    present[m] = False
-    present[m, wide] = True
-    recs, _ = recs_from(raw2, present)
-    r = T.step(1, recs)
+    r = T.step(1, seen_by_a_wide_pair_only(T, rig, X, raw, m, off_mm)[0])
     if kept:
         assert r.status[m] != ST_NONE and np.linalg.norm(r.X[m] - X[m]) < 0.1
     else:
@@ -176,23 +180,10 @@ def test_a_point_back_from_a_loss_is_held_to_where_it_was_last_seen(quiet, off_m
     T, rig, X, raw = tracker_after(quiet)
     T.p = dataclasses.replace(T.p, max_allowed_3d_point_error=2.0)
     m = 3
-    nb = T.nb[m]
-    wide = [1, 3]
     T.X[m] = np.nan                                 # lost on the previous frame, seen the one before
     T.V[m] = np.nan
     T.unseen[m] = 1
-    u = np.cross(X[m] - rig.C[1], X[m] - rig.C[3])
-    Xb = X[m] + off_mm * u / np.linalg.norm(u)
-    moved = rig.project(Xb[None])[0]
-    raw2 = raw.copy()
-    for s in wide:
-        raw2[m, s] = rig.cameras[s].distort(moved[s])
-    assert np.all(np.linalg.norm(raw2[m, wide] - raw[m, wide], axis=1) < TrackingParams().face_point_tracking_distance)
-    present = np.ones(raw.shape[:2], bool)
-    present[nb] = False
-    present[m] = False
-    present[m, wide] = True
-    recs, _ = recs_from(raw2, present)
+    recs, Xb = seen_by_a_wide_pair_only(T, rig, X, raw, m, off_mm)
     r = T.step(1, recs)
     if kept:
         assert r.status[m] != ST_NONE and np.linalg.norm(r.X[m] - Xb) < 0.1
