@@ -224,10 +224,166 @@ def render(rng, h=360, w=480, markers=40, white=False, radius=(2.0, 7.0), aspect
         touched = (dc > -axes[:, 0] - 1.5) & (dc < wd + axes[:, 0] + 1.5)
         hidden = centres[touched]
         centres, axes = centres[~touched], axes[~touched]
+    return SynthImage(_optics(rng, img, blur, noise), centres, axes, hidden)
+
+
+def _optics(rng, img, blur, noise):
+    """The camera: optical blur and sensor noise (sigmas drawn from the ``(low, high)`` ranges), as uint8."""
     img = cv2.GaussianBlur(img, (0, 0), rng.uniform(*blur))
     sig = rng.uniform(*noise)
     img = img + rng.normal(0, 1, img.shape).astype(np.float32) * sig
-    return SynthImage(np.clip(np.rint(img), 0, 255).astype(np.uint8), centres, axes, hidden)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+def _clipped(img, y0, x0, n):
+    """The ``n`` x ``n`` block of ``img`` from ``(y0, x0)``, zero where it lies outside the image."""
+    out = np.zeros((n, n), img.dtype)
+    h, w = img.shape
+    ya, xa, yb, xb = max(0, y0), max(0, x0), min(h, y0 + n), min(w, x0 + n)
+    if ya < yb and xa < xb:
+        out[ya - y0:yb - y0, xa - x0:xb - x0] = img[ya:yb, xa:xb]
+    return out
+
+
+def _paint(rng, white, under):
+    """Grey level of a dot painted on skin of grey level ``under``."""
+    return min(255.0, under + rng.uniform(40, 150)) if white else under * rng.uniform(0.05, 0.55)
+
+
+#: Kinds of face structure :func:`render_grazing` puts thin dots beside.
+GRAZING_KINDS = ("silhouette", "nostril", "mouth")
+
+
+def render_grazing(rng, h=360, w=480, white=False, structures=3, dots=5, markers=10, minor=(0.4, 1.4),
+                   major=(2.5, 6.0), blur=(0.5, 1.2), noise=(0.5, 4.0), confusers=4) -> SynthImage:
+    """Render thin dots seen at grazing angles beside the dark structures of a face.
+
+    The views the classifier finds hardest on the sample takes: dots whose surface faces the
+    camera at 70-85 degrees, so that they are ellipses of minor semi-axis 0.4-1.4 px, drawn
+    tangent to (``structures`` of, cycling through :data:`GRAZING_KINDS`)
+
+    - ``silhouette``: the face's outline, the skin shaded darker towards it (Lambertian
+      fall-off over 3-15 px) against the dark beyond it; dots 1-6 px inside it (cheek,
+      temple and jaw dots near the outline, chin dots seen edge-on);
+    - ``nostril``: a soft dark ellipse; dots 1-4 px outside its rim (nostril dots);
+    - ``mouth``: the dark band of the open mouth or of the jaw's shadow beside a bright band
+      (the teeth); dots on the dark band 1-4 px from the bright one (lower-lip dots with the
+      jaw open).
+
+    Each structure carries ``dots`` such dots; ``markers`` ordinary dots (semi-axes 1.8-7 px)
+    and ``confusers`` confusers keep the rest of the face in the picture. Painted dots are
+    shaded with the skin under them (shading multiplies the albedo of paint and skin alike).
+
+    Returns
+    -------
+    SynthImage
+        ``centres`` and ``axes`` of the dots required; a thin dot reaching past the structure's edge
+        or past an outline drawn later, or whose paint the shade leaves under 10 grey levels of
+        contrast, is in ``hidden`` (neither required nor false).
+    """
+    img = skin(rng, h, w)
+    _confusers(rng, img, white, confusers)
+    shade = np.ones((h, w), np.float32)
+    beyond = np.zeros((h, w), np.float32)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    placed = []  # (cx, cy, room: px to the structure's edge, angle of the major axis)
+    for k in range(structures):
+        kind = GRAZING_KINDS[k % len(GRAZING_KINDS)]
+        p = rng.uniform((w * 0.15, h * 0.15), (w * 0.85, h * 0.85))
+        for _ in range(10):  # a nostril or a mouth inside the face
+            if beyond[int(p[1]), int(p[0])] == 0:
+                break
+            p = rng.uniform((w * 0.15, h * 0.15), (w * 0.85, h * 0.85))
+        if kind == "silhouette":
+            # The outline crosses the image near one of its sides, the face on the image's side of it.
+            side = int(rng.integers(4))  # left, right, top, bottom
+            n0 = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]][side], float)
+            inset, slide = rng.uniform(0.1, 0.3), rng.uniform(-0.35, 0.35)
+            p = np.array([w / 2, h / 2]) + np.abs(n0[::-1]) * slide * (w, h) + n0 * (0.5 - inset) * (w, h)
+            t0 = rng.uniform(-0.5, 0.5)
+            n = np.array([np.cos(t0) * n0[0] - np.sin(t0) * n0[1], np.sin(t0) * n0[0] + np.cos(t0) * n0[1]])
+            R = rng.uniform(200, 1500)
+            c = p - R * n
+            depth = R - np.hypot(xx - c[0], yy - c[1])  # inside the face > 0
+            fall, rim = rng.uniform(3, 15), rng.uniform(0.2, 0.45)
+            shade *= np.where(depth > 0, rim + (1 - rim) * np.sqrt(np.clip(depth / fall, 0, 1)), 1)
+            beyond = np.maximum(beyond, np.clip(0.5 - depth, 0, 1))
+            for _ in range(dots):
+                t = rng.uniform(-0.6, 0.6) * min(h, w) / R
+                d = rng.uniform(1.0, 6.0)
+                u = np.array([np.cos(t) * n[0] - np.sin(t) * n[1], np.sin(t) * n[0] + np.cos(t) * n[1]])
+                q = c + (R - d) * u
+                placed.append((q[0], q[1], d, np.arctan2(u[1], u[0]) + np.pi / 2))
+        elif kind == "nostril":
+            a, b, ang = rng.uniform(8, 20), rng.uniform(4, 9), rng.uniform(0, np.pi)
+            y0, x0, cov = _ellipse_coverage(h, w, p[0], p[1], a, b, ang, ss=2)
+            cov = cv2.GaussianBlur(cov, (0, 0), rng.uniform(1.0, 3.0))
+            _paste(img, y0, x0, cov, img[int(p[1]), int(p[0])] * rng.uniform(0.1, 0.4))
+            for _ in range(dots):
+                t = rng.uniform(0, 2 * np.pi)
+                e = np.array([a * np.cos(t), b * np.sin(t)])
+                rim = p + [e[0] * np.cos(ang) - e[1] * np.sin(ang), e[0] * np.sin(ang) + e[1] * np.cos(ang)]
+                out = (rim - p) / np.linalg.norm(rim - p)
+                d = rng.uniform(1.0, 4.0)
+                q = rim + d * out
+                placed.append((q[0], q[1], d, np.arctan2(out[1], out[0]) + np.pi / 2))
+        else:  # mouth: a dark band with a bright band (the teeth) along one side
+            ang = rng.uniform(0, np.pi)
+            n = np.array([-np.sin(ang), np.cos(ang)])
+            s = (xx - p[0]) * n[0] + (yy - p[1]) * n[1]
+            along = (xx - p[0]) * np.cos(ang) + (yy - p[1]) * np.sin(ang)
+            half = rng.uniform(40, 120)
+            dark_w, teeth_w = rng.uniform(6, 20), rng.uniform(4, 12)
+            inside = np.clip(half + 0.5 - np.abs(along), 0, 1)
+            dark = np.clip(np.minimum(s + 0.5, dark_w + 0.5 - s), 0, 1) * inside
+            teeth = np.clip(np.minimum(0.5 - s, teeth_w + 0.5 + s), 0, 1) * inside
+            img[:] = img * (1 - dark * rng.uniform(0.55, 0.85))
+            img[:] = img * (1 - teeth) + teeth * rng.uniform(150, 245)
+            for _ in range(dots):
+                d = rng.uniform(1.0, 4.0)
+                q = p + rng.uniform(-0.9, 0.9) * half * np.array([np.cos(ang), np.sin(ang)]) + d * n
+                placed.append((q[0], q[1], d, ang))
+    centres, axes, hidden, taken = [], [], [], []  # taken: (x, y, semi-major) of every dot drawn
+
+    def free(cx, cy, a, gap):
+        return all(np.hypot(cx - x, cy - y) >= a + r + gap for x, y, r in taken)
+
+    for cx, cy, room, ang in placed:
+        a, b = rng.uniform(*major), rng.uniform(*minor)
+        if not (a + 3 < cx < w - a - 4 and a + 3 < cy < h - a - 4) or not free(cx, cy, a, 3):
+            continue
+        under = float(img[int(round(cy)), int(round(cx))])
+        val = _paint(rng, white, under)
+        y0, x0, cov = _ellipse_coverage(h, w, cx, cy, a, b, ang)
+        _paste(img, y0, x0, cov, val)
+        taken.append((cx, cy, a))
+        cut = _clipped(beyond, y0, x0, cov.shape[0])
+        # A dot reaching past an outline, or whose paint the shade leaves under 10 grey levels, is not required.
+        if b < room and not (cut * cov).any() \
+                and abs(val - under) * shade[int(round(cy)), int(round(cx))] >= 10:
+            centres.append((cx, cy))
+            axes.append((a, b))
+        else:
+            hidden.append((cx, cy))
+    for _ in range(markers):  # ordinary dots, away from the thin ones and the outline
+        a = rng.uniform(1.8, 7.0)
+        b = a * rng.uniform(0.55, 1.0)
+        cx, cy = rng.uniform(a + 3, w - a - 4), rng.uniform(a + 3, h - a - 4)
+        if shade[int(cy), int(cx)] < 1 or beyond[int(cy), int(cx)] > 0 or not free(cx, cy, a, 8):
+            continue
+        under = float(img[int(cy), int(cx)])
+        val = _paint(rng, white, under)
+        if abs(val - under) < 20:
+            continue
+        y0, x0, cov = _ellipse_coverage(h, w, cx, cy, a, b, rng.uniform(0, np.pi))
+        _paste(img, y0, x0, cov, val)
+        taken.append((cx, cy, a))
+        centres.append((cx, cy))
+        axes.append((a, b))
+    img *= shade
+    img[:] = img * (1 - beyond) + beyond * rng.uniform(8, 40)
+    return SynthImage(_optics(rng, img, blur, noise), np.array(centres, float).reshape(-1, 2),
+                      np.array(axes, float).reshape(-1, 2), np.array(hidden, float).reshape(-1, 2))
 
 
 def disc_image(rng, size=41, radius=4.0, blur=1.0, amplitude=100.0, background=60.0, sigma=1.0,
