@@ -254,6 +254,80 @@ def _paint(rng, white, under):
 GRAZING_KINDS = ("silhouette", "nostril", "mouth")
 
 
+def _silhouette(rng, img, shade, beyond, xx, yy, p, dots):
+    """The face's outline near one side of the image: shading towards it, the dark beyond (in place).
+
+    Returns the thin dots' places ``(cx, cy, room, angle)`` 1-6 px inside it, tangent to it.
+    """
+    h, w = img.shape
+    side = int(rng.integers(4))  # left, right, top, bottom
+    n0 = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]][side], float)
+    inset, slide = rng.uniform(0.1, 0.3), rng.uniform(-0.35, 0.35)
+    p = np.array([w / 2, h / 2]) + np.abs(n0[::-1]) * slide * (w, h) + n0 * (0.5 - inset) * (w, h)
+    t0 = rng.uniform(-0.5, 0.5)
+    n = np.array([np.cos(t0) * n0[0] - np.sin(t0) * n0[1], np.sin(t0) * n0[0] + np.cos(t0) * n0[1]])
+    R = rng.uniform(200, 1500)
+    c = p - R * n
+    depth = R - np.hypot(xx - c[0], yy - c[1])  # inside the face > 0
+    fall, rim = rng.uniform(3, 15), rng.uniform(0.2, 0.45)
+    shade *= np.where(depth > 0, rim + (1 - rim) * np.sqrt(np.clip(depth / fall, 0, 1)), 1)
+    beyond[:] = np.maximum(beyond, np.clip(0.5 - depth, 0, 1))
+    placed = []
+    for _ in range(dots):
+        t = rng.uniform(-0.6, 0.6) * min(h, w) / R
+        d = rng.uniform(1.0, 6.0)
+        u = np.array([np.cos(t) * n[0] - np.sin(t) * n[1], np.sin(t) * n[0] + np.cos(t) * n[1]])
+        q = c + (R - d) * u
+        placed.append((q[0], q[1], d, np.arctan2(u[1], u[0]) + np.pi / 2))
+    return placed
+
+
+def _nostril(rng, img, shade, beyond, xx, yy, p, dots):
+    """A soft dark ellipse at ``p`` (in place); returns the thin dots' places 1-4 px outside its rim."""
+    h, w = img.shape
+    a, b, ang = rng.uniform(8, 20), rng.uniform(4, 9), rng.uniform(0, np.pi)
+    y0, x0, cov = _ellipse_coverage(h, w, p[0], p[1], a, b, ang, ss=2)
+    cov = cv2.GaussianBlur(cov, (0, 0), rng.uniform(1.0, 3.0))
+    _paste(img, y0, x0, cov, img[int(p[1]), int(p[0])] * rng.uniform(0.1, 0.4))
+    placed = []
+    for _ in range(dots):
+        t = rng.uniform(0, 2 * np.pi)
+        e = np.array([a * np.cos(t), b * np.sin(t)])
+        rim = p + [e[0] * np.cos(ang) - e[1] * np.sin(ang), e[0] * np.sin(ang) + e[1] * np.cos(ang)]
+        out = (rim - p) / np.linalg.norm(rim - p)
+        d = rng.uniform(1.0, 4.0)
+        q = rim + d * out
+        placed.append((q[0], q[1], d, np.arctan2(out[1], out[0]) + np.pi / 2))
+    return placed
+
+
+def _mouth(rng, img, shade, beyond, xx, yy, p, dots):
+    """A dark band with a bright band (the teeth) along one side, through ``p`` (in place).
+
+    Returns the thin dots' places on the dark band, 1-4 px from the bright one.
+    """
+    ang = rng.uniform(0, np.pi)
+    n = np.array([-np.sin(ang), np.cos(ang)])
+    s = (xx - p[0]) * n[0] + (yy - p[1]) * n[1]
+    along = (xx - p[0]) * np.cos(ang) + (yy - p[1]) * np.sin(ang)
+    half = rng.uniform(40, 120)
+    dark_w, teeth_w = rng.uniform(6, 20), rng.uniform(4, 12)
+    inside = np.clip(half + 0.5 - np.abs(along), 0, 1)
+    dark = np.clip(np.minimum(s + 0.5, dark_w + 0.5 - s), 0, 1) * inside
+    teeth = np.clip(np.minimum(0.5 - s, teeth_w + 0.5 + s), 0, 1) * inside
+    img[:] = img * (1 - dark * rng.uniform(0.55, 0.85))
+    img[:] = img * (1 - teeth) + teeth * rng.uniform(150, 245)
+    placed = []
+    for _ in range(dots):
+        d = rng.uniform(1.0, 4.0)
+        q = p + rng.uniform(-0.9, 0.9) * half * np.array([np.cos(ang), np.sin(ang)]) + d * n
+        placed.append((q[0], q[1], d, ang))
+    return placed
+
+
+_GRAZING_PLACES = {"silhouette": _silhouette, "nostril": _nostril, "mouth": _mouth}
+
+
 def render_grazing(rng, h=360, w=480, white=False, structures=3, dots=5, markers=10, minor=(0.4, 1.4),
                    major=(2.5, 6.0), blur=(0.5, 1.2), noise=(0.5, 4.0), confusers=4) -> SynthImage:
     """Render thin dots seen at grazing angles beside the dark structures of a face.
@@ -294,55 +368,7 @@ def render_grazing(rng, h=360, w=480, white=False, structures=3, dots=5, markers
             if beyond[int(p[1]), int(p[0])] == 0:
                 break
             p = rng.uniform((w * 0.15, h * 0.15), (w * 0.85, h * 0.85))
-        if kind == "silhouette":
-            # The outline crosses the image near one of its sides, the face on the image's side of it.
-            side = int(rng.integers(4))  # left, right, top, bottom
-            n0 = np.array([[-1, 0], [1, 0], [0, -1], [0, 1]][side], float)
-            inset, slide = rng.uniform(0.1, 0.3), rng.uniform(-0.35, 0.35)
-            p = np.array([w / 2, h / 2]) + np.abs(n0[::-1]) * slide * (w, h) + n0 * (0.5 - inset) * (w, h)
-            t0 = rng.uniform(-0.5, 0.5)
-            n = np.array([np.cos(t0) * n0[0] - np.sin(t0) * n0[1], np.sin(t0) * n0[0] + np.cos(t0) * n0[1]])
-            R = rng.uniform(200, 1500)
-            c = p - R * n
-            depth = R - np.hypot(xx - c[0], yy - c[1])  # inside the face > 0
-            fall, rim = rng.uniform(3, 15), rng.uniform(0.2, 0.45)
-            shade *= np.where(depth > 0, rim + (1 - rim) * np.sqrt(np.clip(depth / fall, 0, 1)), 1)
-            beyond = np.maximum(beyond, np.clip(0.5 - depth, 0, 1))
-            for _ in range(dots):
-                t = rng.uniform(-0.6, 0.6) * min(h, w) / R
-                d = rng.uniform(1.0, 6.0)
-                u = np.array([np.cos(t) * n[0] - np.sin(t) * n[1], np.sin(t) * n[0] + np.cos(t) * n[1]])
-                q = c + (R - d) * u
-                placed.append((q[0], q[1], d, np.arctan2(u[1], u[0]) + np.pi / 2))
-        elif kind == "nostril":
-            a, b, ang = rng.uniform(8, 20), rng.uniform(4, 9), rng.uniform(0, np.pi)
-            y0, x0, cov = _ellipse_coverage(h, w, p[0], p[1], a, b, ang, ss=2)
-            cov = cv2.GaussianBlur(cov, (0, 0), rng.uniform(1.0, 3.0))
-            _paste(img, y0, x0, cov, img[int(p[1]), int(p[0])] * rng.uniform(0.1, 0.4))
-            for _ in range(dots):
-                t = rng.uniform(0, 2 * np.pi)
-                e = np.array([a * np.cos(t), b * np.sin(t)])
-                rim = p + [e[0] * np.cos(ang) - e[1] * np.sin(ang), e[0] * np.sin(ang) + e[1] * np.cos(ang)]
-                out = (rim - p) / np.linalg.norm(rim - p)
-                d = rng.uniform(1.0, 4.0)
-                q = rim + d * out
-                placed.append((q[0], q[1], d, np.arctan2(out[1], out[0]) + np.pi / 2))
-        else:  # mouth: a dark band with a bright band (the teeth) along one side
-            ang = rng.uniform(0, np.pi)
-            n = np.array([-np.sin(ang), np.cos(ang)])
-            s = (xx - p[0]) * n[0] + (yy - p[1]) * n[1]
-            along = (xx - p[0]) * np.cos(ang) + (yy - p[1]) * np.sin(ang)
-            half = rng.uniform(40, 120)
-            dark_w, teeth_w = rng.uniform(6, 20), rng.uniform(4, 12)
-            inside = np.clip(half + 0.5 - np.abs(along), 0, 1)
-            dark = np.clip(np.minimum(s + 0.5, dark_w + 0.5 - s), 0, 1) * inside
-            teeth = np.clip(np.minimum(0.5 - s, teeth_w + 0.5 + s), 0, 1) * inside
-            img[:] = img * (1 - dark * rng.uniform(0.55, 0.85))
-            img[:] = img * (1 - teeth) + teeth * rng.uniform(150, 245)
-            for _ in range(dots):
-                d = rng.uniform(1.0, 4.0)
-                q = p + rng.uniform(-0.9, 0.9) * half * np.array([np.cos(ang), np.sin(ang)]) + d * n
-                placed.append((q[0], q[1], d, ang))
+        placed += _GRAZING_PLACES[kind](rng, img, shade, beyond, xx, yy, p, dots)
     centres, axes, hidden, taken = [], [], [], []  # taken: (x, y, semi-major) of every dot drawn
 
     def free(cx, cy, a, gap):
