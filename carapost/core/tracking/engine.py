@@ -631,9 +631,12 @@ class FrameTracker:
         farther than the other view (at least ``HELD_OUT_FLOOR_PX``), that view goes; the point is
         left to single-sensor tracking on the near one.  (A good pair whose prediction is off
         along one camera's ray lies far in the other camera too, but its views meet.)  On the
-        black and white rendered takes, all 16 such views before this rule were 5-27 px from their
-        marker.  Updates ``X``, ``err``, ``uv_c`` and ``src`` in place.
+        black and white rendered takes, all 16 such views before this rule were 5.6-27 px from their
+        marker.  Part of Remove Bad 2D Projections (off: nothing is dropped).  Updates ``X``, ``err``,
+        ``uv_c`` and ``src`` in place.
         """
+        if not self.p.remove_bad_2d_projections:
+            return
         valid = src != SRC_NONE
         rows = np.flatnonzero((valid.sum(1) == 2) & ((src == SRC_DETECTION).sum(1) == 2)
                               & np.all(np.isfinite(pred), axis=1) & np.all(np.isfinite(X), axis=1))
