@@ -123,10 +123,8 @@ def test_a_nose_tip_dot_on_the_shadow_under_the_nose_is_found_from_its_own_edge(
     on the upper edge of the shadow under the nose.  The intensity measurement from its candidate runs
     into the shadow (6 px off) and a second candidate measures dot and shadow as one 39 x 14 px blob;
     the dot's own edge, around its candidate, outlines it (0.4 px off).  Cameras 1 and 3 see it clear of the
-    shadow.  Since session 7 (candidates placed without the half-pixel shift) the measurement from the dot's
-    candidate is merged into that larger blob as its duplicate; a duplicate whose measurement ran more
-    than ``DUP_DRIFT`` candidate radii off is searched from its own edge all the same, and the retrained
-    classifier scores the edge ellipse over the default threshold (0.98 before the rescue's penalty)."""
+    shadow.  (The classifier retrained with jaw-open frames in session 6 scores that edge ellipse 0.74, 0.20
+    after the rescue's penalty, under the default threshold: camera 0 is checked at 0.15, see docs/blobs.md.)"""
     from carapost.core.blobs import detector
     from carapost.sample.render import leds_of, render_view
     from carapost.sample.scene import build_scene, frame_geometry, true_cameras
@@ -134,18 +132,14 @@ def test_a_nose_tip_dot_on_the_shadow_under_the_nose_is_found_from_its_own_edge(
     g = frame_geometry(sc, 0)
     cams = true_cameras(sc, 0)
     k = list(sc.markers.labels).index("Nose_Tip")
-    images = {c: render_view(sc, g, cams[c], c, 0, leds=leds_of(cams)) for c in (0, 1, 3)}
 
     def error(c, threshold=0.4):
-        img, truth = images[c]
+        img, truth = render_view(sc, g, cams[c], c, 0, leds=leds_of(cams))
         rec = detect(img, threshold=threshold)
         return float(np.hypot(rec["x"] - truth.uv[k, 0], rec["y"] - truth.uv[k, 1]).min())
 
-    assert error(0) < 0.5
+    assert error(0, 0.15) < 0.5
     assert max(error(c) for c in (1, 3)) < 0.3
-    monkeypatch.setattr(detector, "DUP_DRIFT", np.inf)
-    assert error(0, 0.15) > 1.5
-    monkeypatch.undo()
     monkeypatch.setattr(detector, "edge_ellipses", lambda bright, x, *a, **k: np.zeros((len(x), 6)))
     assert error(0, 0.15) > 1.5
 
@@ -254,9 +248,7 @@ def test_a_black_dot_in_brow_hair_is_measured_from_its_painted_side(monkeypatch)
     refine, ellipses = detector.refine_centres, detector.edge_ellipses
     monkeypatch.setattr(detector, "refine_centres", lambda *a, **kw: refine(*a, **{**kw, "flat": False}))
     monkeypatch.setattr(detector, "edge_ellipses", lambda *a, **kw: ellipses(*a, **{**kw, "flat": False}))
-    # Without the test at least one view is far off (session 7: 0.55, 1.05, 0.21, 0.10 px; until
-    # session 6, when candidates were placed half a pixel off, every view was over 0.8 px).
-    assert errors().max() > 0.8
+    assert errors().min() > 0.8
 
 
 def test_a_white_lower_lip_dot_grown_into_the_teeth_is_found_from_its_own_edge(monkeypatch):

@@ -69,32 +69,6 @@ def test_centre_accuracy_isolated_disc():
     assert np.allclose(rec["major"], 8.0, atol=0.8) and np.allclose(rec["minor"], 8.0, atol=0.8)
 
 
-def test_candidates_of_every_octave_are_centred_on_their_disc():
-    # cv2.pyrDown centres level pixel i on full-resolution pixel 2 i: a candidate found on
-    # level L at level coordinate u lies at u * 2^L.  The mapping (u + 0.5) 2^L - 0.5 put every
-    # candidate (2^L - 1) / 2 px right of and below its blob in x and y (0.5 px on level 1,
-    # 1.5 px on level 2), so measurement windows and the from-edge search of a drawn-off dot
-    # started off-centre.
-    from carapost.core.blobs.detector import find_candidates
-
-    rng = np.random.default_rng(11)
-    err: dict[int, list] = {}
-    for radius in (2.5, 4.0, 7.0):
-        for _ in range(6):
-            img, c = disc_image(rng, 81, radius, 0.8, 120.0, 200.0, 1.0, dark=True)
-            cand, _ = find_candidates(np.clip(np.rint(img), 0, 255).astype(np.uint8), False, 4.0, 50.0)
-            for level in np.unique(cand.level):
-                on = cand.level == level
-                d = np.hypot(cand.x - c[0], cand.y - c[1])
-                k = np.argmin(np.where(on, d, np.inf))
-                if d[k] < radius + 1.0 and radius <= 2.0 * 2.0 ** level:  # the sizes that level is for
-                    err.setdefault(int(level), []).append((cand.x[k] - c[0], cand.y[k] - c[1]))
-    assert 1 in err and 2 in err
-    for level, e in err.items():
-        mean = np.mean(e, axis=0)
-        assert np.all(np.abs(mean) < 0.1 * 2.0 ** level), (level, mean)
-
-
 @pytest.mark.parametrize("angle", [0.0, 30.0, -60.0])
 def test_ellipse_axes_and_angle_of_an_oblique_dot(angle):
     from carapost.core.blobs.synth import _ellipse_coverage, _paste

@@ -96,10 +96,12 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
             continue
         f_all.append(fe.features(padded, g, ys, xs, dog, level, noise))
         scale = 2.0 ** level
-        # pyrDown centres level pixel i on full-resolution pixel 2 i (its 5-tap kernel is centred on
-        # the even sample), so level coordinates scale by 2^level with no half-pixel shift.
-        xs_all.append((xs + ox - b) * scale)
-        ys_all.append((ys + oy - b) * scale)
+        # Not where cv2.pyrDown centres level pixel u (that is u * 2^L): these candidates sit (2^L - 1)/2 px
+        # right of and below their blob.  The fit re-centres them; the classifier and the rescue's limits
+        # were trained and tuned with them there, and placing them exactly (the classifier retrained)
+        # made tracking worse (docs/blobs.md, "Candidates on the pyramid's grid").
+        xs_all.append((xs + ox - b + 0.5) * scale - 0.5)
+        ys_all.append((ys + oy - b + 0.5) * scale - 0.5)
         lv_all.append(np.full(len(xs), level, np.int8))
     if not f_all:
         z = np.zeros(0)
@@ -212,10 +214,6 @@ DRIFT = 1.0
 #: and 34 elsewhere (brow hair, lip creases, the dark outside the face) 0.40-1.0, most under 0.88;
 #: 2.4 moves 0.88 to the default threshold 0.4: 38 of the 43 are kept and 6 of the 34.
 RESCUE_LOGIT = 2.4
-#: A duplicate candidate (merged into a blob already measured) is looked at when its own fit ended more
-#: than DUP_DRIFT candidate radii (and 1.5 px) away.  (1.0 and 1.5 were tried: the same figures on the
-#: benchmark frames, 1.5 searches ~1.5 fewer candidates a frame.)
-DUP_DRIFT = 1.5
 #: A fit that holds its candidate and that stage 2 scores this high is not looked at again.
 RESCUE_ABOVE = 0.9
 #: A fit whose semi-major axis is this many times its candidate's radius was drawn off its dot (it took in what
@@ -241,12 +239,8 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     r0 = cand.radius[sel]
     grown = 0.5 * major > GROWN * r0
     drift = (moved > np.maximum(DRIFT * r0, 1.5)) | grown
-    # Duplicate candidates of a blob already measured (not ok after the first round's merge) stay out,
-    # unless the measurement ran off them (a dot swallowed into a larger region it touches: the nose
-    # tip's candidate merged with the shadow under the nose, 5 px away): their merged blob is then
-    # checked for a clean edge of its own below, as a fit holding its candidate is.
-    dup = ~ok & (moved <= np.maximum(np.maximum(0.5 * major, r0), 2.0))
-    drift &= ~dup | (moved > np.maximum(DUP_DRIFT * r0, 1.5))
+    # Duplicate candidates of a blob already measured (not ok after the first round's merge) stay out.
+    drift &= ok | (moved > np.maximum(np.maximum(0.5 * major, r0), 2.0))
     # Only the finest octave's candidates: a dot drawn off is small, and its candidate there sits inside
     # it (on sample frames of seeds 6-8, every rescued ellipse that became a hit came from that octave,
     # and coarser ones were ~40 % of the edge searches).
@@ -261,7 +255,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     sx, sy = cand.x[sel][idx], cand.y[sel][idx]
     # A fit that holds its candidate may be a larger blob the candidate is part of: its own clean
     # edge says so.  One that left its candidate behind says nothing about it.
-    held = np.where((moved[idx] <= 0.5 * minor[idx]) | dup[idx], major[idx], 0.0)
+    held = np.where(moved[idx] <= 0.5 * minor[idx], major[idx], 0.0)
     # A dot measured with the hair it touches: that side of its own edge is spoilt too (its best arc).
     e = edge_ellipses(bright, sx, sy, r0[idx], (x[idx], y[idx], held, minor[idx], ang[idx]), grown[idx],
                       flat=not cand.white)
