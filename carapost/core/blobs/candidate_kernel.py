@@ -233,6 +233,7 @@ def greedy_nms(x, y, rad, order, use_max, extra):
             if j == i or not alive[j]:
                 continue
             lim = (max(rad[i], rad[j]) if use_max else min(rad[i], rad[j])) + extra
-            if math.hypot(x[i] - x[j], y[i] - y[j]) < lim:
+            dx, dy = x[i] - x[j], y[i] - y[j]
+            if dx * dx + dy * dy < lim * lim:
                 alive[j] = False
     return alive

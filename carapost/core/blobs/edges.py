@@ -137,14 +137,15 @@ def _sample(gx, gy, x0, y0, px, py, wx, wy):
     ix, iy = math.floor(px), math.floor(py)
     _cubic(px - ix, wx)
     _cubic(py - iy, wy)
-    # The box reaches 2 px beyond every sample (see _edge_points): no tap needs clamping.
-    c0, r0 = int(ix) - 1 - x0, int(iy) - 1 - y0
+    w0, w1, w2, w3 = wx[0], wx[1], wx[2], wx[3]
+    # The box reaches 2 px beyond every sample (see _edge_points): no tap needs clamping, so the
+    # indices are never negative (unsigned: numba then tests no wrap-around per tap).
+    c0, r0 = np.uint64(int(ix) - 1 - x0), np.uint64(int(iy) - 1 - y0)
     sx = sy = 0.0
     for j in range(4):
-        ax = ay = 0.0
-        for i in range(4):
-            ax += wx[i] * gx[r0 + j, c0 + i]
-            ay += wx[i] * gy[r0 + j, c0 + i]
+        rx, ry = gx[r0 + np.uint64(j)], gy[r0 + np.uint64(j)]
+        ax = w0 * rx[c0] + w1 * rx[c0 + np.uint64(1)] + w2 * rx[c0 + np.uint64(2)] + w3 * rx[c0 + np.uint64(3)]
+        ay = w0 * ry[c0] + w1 * ry[c0 + np.uint64(1)] + w2 * ry[c0 + np.uint64(2)] + w3 * ry[c0 + np.uint64(3)]
         sx += wy[j] * ax
         sy += wy[j] * ay
     return sx, sy
@@ -192,7 +193,7 @@ def _edge_points(img, cx, cy, a, b, th, ex, ey, peak):
         px, py = cx + ca * ux - sa * uy, cy + sa * ux + ca * uy
         # The ellipse's outward normal at parameter phi is (b cos phi, a sin phi) in its own axes.
         m0, m1 = b * c, a * s
-        norm = math.hypot(m0, m1)
+        norm = math.sqrt(m0 * m0 + m1 * m1)
         m0, m1 = m0 / norm, m1 / norm
         nx, ny = ca * m0 - sa * m1, sa * m0 + ca * m1
         # Coarse search, bilinear every COARSE steps; then bicubic at the peak and its neighbours (the
@@ -312,7 +313,7 @@ def _conic_solve(u, v, w, scale, res):
         alg = A * u[k] * u[k] + B * u[k] * v[k] + C * v[k] * v[k] + D * u[k] + E * v[k] + F
         gu = 2.0 * A * u[k] + B * v[k] + D
         gv = B * u[k] + 2.0 * C * v[k] + E
-        res[k] = abs(alg) / max(math.hypot(gu, gv), 1e-12) * scale
+        res[k] = abs(alg) / max(math.sqrt(gu * gu + gv * gv), 1e-12) * scale
     return x0, y0, det > 0, z
 
 
@@ -386,7 +387,7 @@ def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
         if peak[k] <= 0.0:
             continue
         dx, dy = ex[k] - cx, ey[k] - cy
-        r = math.hypot(dx, dy)
+        r = math.sqrt(dx * dx + dy * dy)
         if r < 1e-6:
             continue
         dx, dy = dx / r, dy / r
