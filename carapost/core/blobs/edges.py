@@ -442,9 +442,15 @@ def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False, flat=0):
     lim = WEAK * np.median(peak)
     if flat == 1 and FLAT > 0.0 and b >= FLAT_MINOR:
         _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, buf[7])
+    usable = 0.0
     for k in range(RAYS):
         w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 else 0.0
+        usable += w[k]
         u[k], v[k] = (ex[k] - cx) / a, (ey[k] - cy) / a
+    if usable < MIN_RAYS * RAYS:
+        # Neither the whole edge nor any arc can keep enough rays to be clean (callers use nothing else
+        # of an edge that is not): no fit.
+        return 0.0, 0.0, False, np.inf, usable
     x0, y0, ok, spread = _robust_conic(u, v, w, peak, lim, a, res)
     if flat == 2 and FLAT > 0.0 and ok:
         # The flat-paint test, about the ellipse just fitted; again without the rays it drops.
