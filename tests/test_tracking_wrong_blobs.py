@@ -217,6 +217,20 @@ def test_a_jaw_jerk_seen_by_every_camera_is_kept(quiet, jump_mm, kept):
         assert r.status[m] == ST_NONE
 
 
+def pair_that_misses(rig, X, raw, m, off_px):
+    """Point ``m`` seen by cameras 0 and 2 only, camera 0's blob moved ``off_px`` across the epipolar line
+    of camera 2's view (the two rays miss each other).  Returns the raw detections and which are present."""
+    o, dr = rig.rays(np.array([2]), rig.project(X[m][None])[0, 2][None])
+    line = rig.project(np.stack([o[0] + t * dr[0] for t in np.dot(X[m] - o[0], dr[0]) + np.array([-5.0, 5.0])]))[:, 0]
+    along = (line[1] - line[0]) / np.linalg.norm(line[1] - line[0])
+    uv0 = rig.project(X[m][None])[0, 0] + off_px * np.array([-along[1], along[0]])
+    raw2 = raw.copy()
+    raw2[m, 0] = rig.cameras[0].distort(uv0)
+    present = np.ones(raw.shape[:2], bool)
+    present[m, [1, 3]] = False
+    return raw2, present
+
+
 @pytest.mark.parametrize("off_px,kept", [(0.0, True), (9.0, False)])
 def test_a_pair_whose_far_view_misses_the_other_loses_it(quiet, off_px, kept):
     """Lip_Lower_L of the white 35-marker take, frame 107 forwards (93 backwards): back from a loss.
@@ -232,15 +246,7 @@ def test_a_pair_whose_far_view_misses_the_other_loses_it(quiet, off_px, kept):
     T.V[m] = np.nan
     T.uv_prev[m] = np.nan
     T.unseen[m] = 1
-    # Camera 0's blob moved across the epipolar line of camera 2's view: the two rays miss each other.
-    o, dr = rig.rays(np.array([2]), rig.project(X[m][None])[0, 2][None])
-    line = rig.project(np.stack([o[0] + t * dr[0] for t in np.dot(X[m] - o[0], dr[0]) + np.array([-5.0, 5.0])]))[:, 0]
-    along = (line[1] - line[0]) / np.linalg.norm(line[1] - line[0])
-    uv0 = rig.project(X[m][None])[0, 0] + off_px * np.array([-along[1], along[0]])
-    raw2 = raw.copy()
-    raw2[m, 0] = rig.cameras[0].distort(uv0)
-    present = np.ones(raw.shape[:2], bool)
-    present[m, [1, 3]] = False
+    raw2, present = pair_that_misses(rig, X, raw, m, off_px)
     recs, index = recs_from(raw2, present)
     r = T.step(1, recs)
     assert r.det[m, 2] == index[m, 2]
@@ -258,14 +264,7 @@ def test_a_pair_that_misses_is_checked_against_its_own_motion_where_no_neighbour
     """
     T, rig, X, raw = tracker_after(quiet)
     m = 3
-    o, dr = rig.rays(np.array([2]), rig.project(X[m][None])[0, 2][None])
-    line = rig.project(np.stack([o[0] + t * dr[0] for t in np.dot(X[m] - o[0], dr[0]) + np.array([-5.0, 5.0])]))[:, 0]
-    along = (line[1] - line[0]) / np.linalg.norm(line[1] - line[0])
-    uv0 = rig.project(X[m][None])[0, 0] + off_px * np.array([-along[1], along[0]])
-    raw2 = raw.copy()
-    raw2[m, 0] = rig.cameras[0].distort(uv0)
-    present = np.ones(raw.shape[:2], bool)
-    present[m, [1, 3]] = False
+    raw2, present = pair_that_misses(rig, X, raw, m, off_px)
     present[T.nb[m]] = False                         # its neighbours unseen: no elastic prediction
     recs, index = recs_from(raw2, present)
     r = T.step(1, recs)
