@@ -35,11 +35,10 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from carapost.cli import main  # noqa: E402
-from carapost.core.blobs.synth import sample_frames  # noqa: E402
 from carapost.core.points import ST_SINGLE  # noqa: E402
 from carapost.io.cara import load_project  # noqa: E402
 from carapost.io.export_c3d import exported_points  # noqa: E402
-from carapost.sample.trial import seen  # noqa: E402
+from carapost.sample.trial import faint_by_camera, seen  # noqa: E402
 
 SWAP_MM = 3.0
 
@@ -121,11 +120,6 @@ def score_c3d(path: Path, truth: dict, faint: list[set], single: np.ndarray | No
             "worst_rms_mm": {k: round(v, 3) for k, v in sorted(per.items(), key=lambda kv: -kv[1])[:5]}}
 
 
-def faint_of_take(markers: int, seed: int, white: bool) -> list[set]:
-    """Per camera, the take's markers faint on frame 0 (black paint on a black brow), not counted as visible."""
-    return [set(f.faint_names or ()) for f in sample_frames(white, seed=seed, frames=1, markers=markers)]
-
-
 def single_sensor_samples(project) -> np.ndarray:
     """``(F, P)`` bool: which samples of the exported points (the C3D's order) are single-sensor."""
     pts = exported_points(project)
@@ -149,7 +143,7 @@ def one(markers: int, seed: int, frames: int, white: bool = False) -> dict:
             return {"error": f"carapost process returned {rc}"}
         truth = dict(np.load(d / "truth.npz"))
         single = single_sensor_samples(load_project(d / "Sample.cara"))
-        r = score_c3d(d / "Sample.c3d", truth, faint_of_take(markers, seed, white), single)
+        r = score_c3d(d / "Sample.c3d", truth, faint_by_camera(markers, seed, white), single)
         r["process_s"] = round(seconds, 1)
         return r
 

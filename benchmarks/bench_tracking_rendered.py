@@ -88,7 +88,7 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
             "most_missed": {labels[m]: int(miss[m]) for m in worst if miss[m]}}
 
 
-def one(markers: int, seed: int, frames: int, directions=(+1, -1)) -> dict:
+def one(markers: int, seed: int, frames: int, directions=(+1, -1), white: bool = False) -> dict:
     """Render and detect one take, then per direction initialise, track and score it.
 
     Direction +1: Initialize 3D on frame 0 and Track Forwards [Sequence]; -1: Initialize 3D on the
@@ -104,12 +104,12 @@ def one(markers: int, seed: int, frames: int, directions=(+1, -1)) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         t0 = time.perf_counter()
-        write_sample(d, markers=markers, frames=frames, seed=seed)
+        write_sample(d, markers=markers, frames=frames, seed=seed, white=white)
         t1 = time.perf_counter()
         project, doc, truth = open_sample_take(d, markers, 0, frames - 1)
         t2 = time.perf_counter()
         images = TakeFrames(project)
-        faint = faint_by_camera(markers, seed)
+        faint = faint_by_camera(markers, seed, white)
         detected = doc.stack.index
         for direction in directions:
             doc.stack.set_index(detected)
@@ -126,15 +126,18 @@ def one(markers: int, seed: int, frames: int, directions=(+1, -1)) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
-    """One row per take and direction (quick: 35 markers, seed 1, 60 frames, both directions; full: 35/seed 1,
-    100/seed 2 and 156/seed 0, 300 frames, forwards from frame 0 and backwards from the last frame)."""
-    takes = [(35, 1, 60)] if quick else [(35, 1, 300), (100, 2, 300), (156, 0, 300)]
+    """One row per take and direction (quick: 35 markers, seed 1, 60 frames, both directions; full: 35/seed 1
+    black and white, 100/seed 2 and 156/seed 0, 300 frames, forwards from frame 0 and backwards from the last
+    frame)."""
+    takes = [(35, 1, 60, False)] if quick else [(35, 1, 300, False), (35, 1, 300, True), (100, 2, 300, False),
+                                                (156, 0, 300, False)]
     rows = []
-    for markers, seed, frames in takes:
-        for direction, r in one(markers, seed, frames).items():
+    for markers, seed, frames, white in takes:
+        for direction, r in one(markers, seed, frames, white=white).items():
             ok = r["coverage"] >= 0.995 and r["swapped_points"] == 0 and r["rms_mm"] <= 0.1
             way = "forwards" if direction > 0 else "backwards"
-            rows.append({"benchmark": f"tracking_rendered_{markers}m_seed{seed}_{frames}f_{way}",
+            colour = "_white" if white else ""
+            rows.append({"benchmark": f"tracking_rendered_{markers}m{colour}_seed{seed}_{frames}f_{way}",
                          "value": round(r["coverage"], 4), "unit": "coverage",
                          "target": ">= 0.995, 0 swaps, <= 0.1 mm", "pass": bool(ok),
                          **{k: (round(v, 4) if isinstance(v, float) else v) for k, v in r.items()

@@ -12,6 +12,7 @@ from carapost.cli import main
 from carapost.io.c3d import read_c3d
 from carapost.io.cara import load_project
 from carapost.sample import write_sample
+from carapost.sample.trial import faint_by_camera
 
 
 def test_process_a_sample_take(tmp_path):
@@ -43,7 +44,7 @@ def test_process_a_sample_take(tmp_path):
         "bench_process", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_process.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    faint = bench.faint_of_take(35, 1, white=False)
+    faint = faint_by_camera(35, 1)
     single = bench.single_sensor_samples(p)
     r = bench.score_c3d(tmp_path / "out.c3d", dict(np.load(tmp_path / "truth.npz")), faint, single)
     assert r["coverage"] >= 0.995 and r["swapped_points"] == 0 and r["rms_mm"] <= 0.1, r
