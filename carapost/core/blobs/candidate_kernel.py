@@ -237,3 +237,40 @@ def greedy_nms(x, y, rad, order, use_max, extra):
             if dx * dx + dy * dy < lim * lim:
                 alive[j] = False
     return alive
+
+
+@njit(**JIT_EXACT)
+def _max_nan(a, b):
+    """``np.maximum(a, b)`` of two scalars: NaN if either is NaN."""
+    return a if (a >= b) | (a != a) else b
+
+
+@njit(**JIT_EXACT)
+def profile_radius(F, level, out):
+    """Half-contrast radius (full-resolution px) of each candidate from its profile features ``F[:, 1:4]``.
+
+    Step 2, the radius estimate (:func:`.features.profile_radius`, which documents it), times
+    ``2 ** level``: numpy's float32 arithmetic operation for operation (the profile and the
+    interpolation's fraction are float32, the radius float64), so the result is the same to the bit.
+    Writes ``out``.
+    """
+    r1, r2, r3 = 1.5, 2.5, 3.6
+    zero = np.float32(0.0)
+    half = np.float32(0.5)
+    tiny = np.float32(1e-6)
+    for c in range(F.shape[0]):
+        # The clipped profile's running maximum (numpy's maximum: NaN stays NaN).
+        p1 = _max_nan(zero, _max_nan(F[c, 1], zero))
+        p2 = _max_nan(p1, _max_nan(F[c, 2], zero))
+        p3 = _max_nan(p2, _max_nan(F[c, 3], zero))
+        r = 3.6
+        if p1 >= half:
+            t = (half - zero) / _max_nan(p1 - zero, tiny)
+            r = 0.0 + np.float64(t) * (r1 - 0.0)
+        elif p2 >= half:
+            t = (half - p1) / _max_nan(p2 - p1, tiny)
+            r = r1 + np.float64(t) * (r2 - r1)
+        elif p3 >= half:
+            t = (half - p2) / _max_nan(p3 - p2, tiny)
+            r = r2 + np.float64(t) * (r3 - r2)
+        out[c] = min(max(r, 0.7), 3.6) * 2.0 ** level[c]

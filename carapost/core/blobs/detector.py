@@ -24,7 +24,7 @@ from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from ..heap import keep_freed_memory
 from . import features as fe
-from .candidate_kernel import greedy_nms
+from .candidate_kernel import greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, measure_at, window_for
 from .edges import MERGED, edge_ellipses, refine_centres
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
@@ -109,8 +109,10 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
                           bool(white)), bright
     F = np.concatenate(f_all)
     lv = np.concatenate(lv_all)
-    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv,
-                      fe.profile_radius(F) * 2.0 ** lv, noise, F, bool(white)), bright
+    # fe.profile_radius(F) * 2.0 ** lv, compiled (the same float32 and float64 arithmetic).
+    radius = np.empty(len(F))
+    profile_radius(F, lv, radius)
+    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv, radius, noise, F, bool(white)), bright
 
 
 #: Rounds of measurement; each re-centres the window on the last answer and sizes it by the last major axis.
@@ -168,7 +170,8 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
             good = np.flatnonzero(ok)
             # Of one blob's candidates, the one nearest the answer (its window was the best centred).
             keep = good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]
-            ok[np.setdiff1d(good, keep)] = False
+            ok[good] = False
+            ok[keep] = True
         t = todo[ok[todo]]
         r_new = np.clip(GROW * 0.5 * out[2][t], 1.0, WINDOWS[-1] - BORDER)
         moved = np.hypot(out[0][t] - cx[t], out[1][t] - cy[t])
