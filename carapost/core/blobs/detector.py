@@ -25,7 +25,8 @@ from ..errors import CaraError
 from ..heap import keep_freed_memory
 from . import features as fe
 from .candidate_kernel import greedy_nms, profile_radius
-from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, measure_at, window_for
+from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants, measure_at, window_for
+from .measure_kernel import fit_round, next_round
 from .edges import MERGED, edge_ellipses, refine_centres
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
@@ -142,7 +143,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     are not ``ok``).  ``pad`` is :func:`padded` of ``bright`` when the caller has it.
     """
     n = len(x)
-    out = [np.zeros(n, np.float64) for _ in range(5)]
+    out = np.zeros((5, n), np.float64)
     ok = np.zeros(n, bool)
     extra = np.zeros((n, len(MEASURE_NAMES)))
     if n == 0:
@@ -152,16 +153,13 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     h, w = bright.shape
     cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
     todo = np.arange(n)
+    consts = _constants()
+    windows = np.asarray(WINDOWS, np.int64)
+    img = np.ascontiguousarray(pad)
     for rnd in range(ROUNDS):
-        win = window_for(rr[todo])
-        ix = np.clip(np.rint(cx[todo]).astype(np.int64), 0, w - 1)
-        iy = np.clip(np.rint(cy[todo]).astype(np.int64), 0, h - 1)
-        res = measure_at(pad, ix + hp, iy + hp, win, rr[todo], noise, PASSES if rnd == 0 else 2)
-        out[0][todo], out[1][todo] = ix + res[0], iy + res[1]
-        for i in (2, 3, 4):
-            out[i][todo] = res[i]
-        ok[todo] = res[5]
-        extra[todo] = res[6]
+        # Windows about (cx, cy) sized by rr (window_for), measured (measure_at), compiled.
+        fit_round(img, hp, w, h, cx, cy, rr, todo, float(noise), PASSES if rnd == 0 else 2, windows, BORDER,
+                  consts, out, ok, extra)
         if rnd == 0:
             # A candidate outside the blob it led to belongs to something else (a neighbour's
             # measurement took it in): it must not win the merge below.
@@ -172,12 +170,9 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
             keep = good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]
             ok[good] = False
             ok[keep] = True
-        t = todo[ok[todo]]
-        r_new = np.clip(GROW * 0.5 * out[2][t], 1.0, WINDOWS[-1] - BORDER)
-        moved = np.hypot(out[0][t] - cx[t], out[1][t] - cy[t])
-        again = t[(moved > 0.5) | (np.abs(r_new - rr[t]) > 0.1 * rr[t])]
-        cx[t], cy[t], rr[t] = out[0][t], out[1][t], r_new
-        todo = again
+        # The ok ones whose centre moved over half a pixel or whose weights' radius
+        # clip(GROW * major / 2, 1, WINDOWS[-1] - BORDER) changed by over a tenth; (cx, cy, rr) updated.
+        todo = next_round(todo, ok, out, cx, cy, rr, GROW * 0.5, 1.0, WINDOWS[-1] - BORDER)
         if len(todo) == 0:
             break
     return (*out, ok, extra)
