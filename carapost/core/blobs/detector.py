@@ -25,7 +25,7 @@ from ..errors import CaraError
 from ..heap import keep_freed_memory
 from . import features as fe
 from .candidate_kernel import greedy_nms, profile_radius
-from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants, measure_at, window_for
+from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .measure_kernel import fit_round, next_round
 from .edges import MERGED, edge_ellipses, refine_centres
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
@@ -123,14 +123,7 @@ ROUNDS = 3
 GROW = 1.15
 
 
-def padded(bright: np.ndarray) -> np.ndarray:
-    """``bright`` with a replicated border of the largest measurement window's half-size (``WINDOWS[-1]``)."""
-    hp = WINDOWS[-1]
-    return cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
-
-
-def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float,
-                   pad: np.ndarray | None = None):
+def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float):
     """Steps 3-4: centre and ellipse of each candidate; returns full-resolution (x, y, major, minor, angle, ok, extra).
 
     ``extra`` is ``(N, len(MEASURE_NAMES))`` (:func:`.centre.measure`).  Up to
@@ -140,7 +133,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     elongated blob is often two candidates (the ends of its major axis): after the
     first round, answers closer than half the larger minor axis are one blob, and
     only the one whose candidate was nearest its answer is measured on (the others
-    are not ``ok``).  ``pad`` is :func:`padded` of ``bright`` when the caller has it.
+    are not ``ok``).  Windows reaching past the image's edge replicate it.
     """
     n = len(x)
     out = np.zeros((5, n), np.float64)
@@ -148,17 +141,16 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     extra = np.zeros((n, len(MEASURE_NAMES)))
     if n == 0:
         return (*out, ok, extra)
-    hp = WINDOWS[-1]
-    pad = padded(bright) if pad is None else pad
     h, w = bright.shape
     cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
     todo = np.arange(n)
     consts = _constants()
     windows = np.asarray(WINDOWS, np.int64)
-    img = np.ascontiguousarray(pad)
+    # The windows that reach past the image's edge replicate it (no padded copy of the frame).
+    img = np.ascontiguousarray(bright)
     for rnd in range(ROUNDS):
         # Windows about (cx, cy) sized by rr (window_for), measured (measure_at), compiled.
-        fit_round(img, hp, w, h, cx, cy, rr, todo, float(noise), PASSES if rnd == 0 else 2, windows, BORDER,
+        fit_round(img, 0, w, h, cx, cy, rr, todo, float(noise), PASSES if rnd == 0 else 2, windows, BORDER,
                   consts, out, ok, extra)
         if rnd == 0:
             # A candidate outside the blob it led to belongs to something else (a neighbour's
@@ -220,7 +212,7 @@ GROWN = 1.5
 
 
 def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, ang, ok, extra,
-                    among=None, pad=None) -> np.ndarray:
+                    among=None) -> np.ndarray:
     """Fits drawn off their candidate's dot are replaced by the dot's own edge ellipse (in place).
 
     The intensity measurement weighs every pixel of its window, so a small dot
@@ -231,8 +223,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     and the candidate's is (:func:`.edges.edge_ellipses`), the candidate's
     edge ellipse is the blob; its stage-2 measurements are taken again in a
     window about it (one solve, whose centre is not used).  Only fits in ``among``
-    (all by default) are looked at; ``pad`` is :func:`padded` of ``bright`` when the
-    caller has it.  Returns which fits were replaced.
+    (all by default) are looked at.  Returns which fits were replaced.
     """
     r0 = cand.radius[sel]
     grown = 0.5 * major > GROWN * r0
@@ -261,16 +252,17 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     idx, e = idx[good], e[good]
     if len(idx) == 0:
         return rescued
-    hp = WINDOWS[-1]
-    pad = padded(bright) if pad is None else pad
     h, w = bright.shape
-    ix = np.clip(np.rint(e[:, 0]).astype(np.int64), 0, w - 1)
-    iy = np.clip(np.rint(e[:, 1]).astype(np.int64), 0, h - 1)
+    m = len(idx)
+    # One solve in a window about each edge ellipse (fit_candidates' round, compiled; its centre is not used).
     rr = np.clip(GROW * 0.5 * e[:, 2], 1.0, WINDOWS[-1] - BORDER)
-    res = measure_at(pad, ix + hp, iy + hp, window_for(rr), rr, cand.noise, 1)
+    ok_e, extra_e = np.zeros(m, bool), np.zeros((m, len(MEASURE_NAMES)))
+    fit_round(np.ascontiguousarray(bright), 0, w, h, np.ascontiguousarray(e[:, 0]), np.ascontiguousarray(e[:, 1]),
+              rr, np.arange(m), float(cand.noise), 1, np.asarray(WINDOWS, np.int64), BORDER, _constants(),
+              np.zeros((5, m)), ok_e, extra_e)
     x[idx], y[idx], major[idx], minor[idx], ang[idx] = e[:, 0], e[:, 1], e[:, 2], e[:, 3], e[:, 4]
-    ok[idx] = res[5]
-    extra[idx] = res[6]
+    ok[idx] = ok_e
+    extra[idx] = extra_e
     rescued[idx] = True
     return rescued
 
@@ -351,9 +343,8 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     # One blob is usually a candidate on two or three octaves: fit it once, from the
     # finest octave's candidate (closest to the centre; coarse ones start pixels off).
     sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
-    pad = padded(bright)
     x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
-                                                         cand.noise, pad)
+                                                         cand.noise)
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     among = None
     if model.stage2 is not None:
@@ -361,7 +352,7 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
         # search costs ~50 us a candidate; most drifted candidates are coarse octaves' of a clean blob).
         p0 = model.stage2.predict(_fit_features(cand, sel, logit1, x, y, major, minor, extra, np.zeros(len(sel))))
         among = ~(ok & (p0 >= RESCUE_ABOVE) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
-    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among, pad)
+    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among)
     # The centre may wander to a neighbour: the candidate must stay inside the blob found.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)

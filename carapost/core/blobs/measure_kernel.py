@@ -368,9 +368,10 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
     """Measure blobs in windows of ``img`` centred on pixels ``(ix, iy)``, half-sizes ``hs``.
 
     Step 3 for every blob of a frame (one call per round): copies each window
-    (``img`` must be padded by the largest half-size) and runs
+    (where one reaches past the image's edge, the edge replicated) and runs
     :func:`measure_one`.  ``out`` is ``(N, 6)``, ``extra`` ``(N, 9)``.
     """
+    H, W = img.shape
     hmax = 1
     for k in range(len(hs)):
         hmax = max(hmax, hs[k])
@@ -391,12 +392,20 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
                 for j in range(n - 1):
                     GX[i * (n - 1) + j] = j - h + 0.5
                     GY[i * (n - 1) + j] = i - h + 0.5
-        x0 = ix[k] - h
-        for i in range(n):
-            src = img[iy[k] - h + i, x0:x0 + n]
-            dst = P[i * n:i * n + n]
-            for j in range(n):
-                dst[j] = src[j]
+        x0, y0 = ix[k] - h, iy[k] - h
+        if x0 >= 0 and y0 >= 0 and x0 + n <= W and y0 + n <= H:
+            for i in range(n):
+                src = img[y0 + i, x0:x0 + n]
+                dst = P[i * n:i * n + n]
+                for j in range(n):
+                    dst[j] = src[j]
+        else:
+            # A window reaching past the image's edge: the edge replicated (as cv2.BORDER_REPLICATE pads).
+            for i in range(n):
+                src = img[min(max(y0 + i, 0), H - 1)]
+                dst = P[i * n:i * n + n]
+                for j in range(n):
+                    dst[j] = src[min(max(x0 + j, 0), W - 1)]
         measure_one(h, max(float(r0[k]), 1.0), noise, passes, c, S, out[k], extra[k])
 
 
@@ -409,7 +418,8 @@ def fit_round(img, hp, w, h, cx, cy, rr, todo, noise, passes, windows, border, c
     """One round of :func:`carapost.core.blobs.detector.fit_candidates` for the blobs ``todo`` (in place).
 
     Each blob's window is centred on its pixel nearest ``(cx, cy)`` (clipped to the
-    ``w x h`` image, ``img`` being it padded by ``hp``), sized by ``rr``
+    ``w x h`` image; ``img`` is that image padded by ``hp``, or ``hp`` is 0 and the
+    windows' edges are replicated), sized by ``rr``
     (:func:`carapost.core.blobs.centre.window_for`), and measured (:func:`measure_at`
     with the radius as float32, as :func:`carapost.core.blobs.centre.measure_at`
     passes it); writes the full-resolution ``out[0:5, k]`` (x, y, major, minor, angle),
