@@ -18,13 +18,12 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from ..heap import keep_freed_memory
 from . import features as fe
-from .candidate_kernel import greedy_nms, profile_radius
+from .candidate_kernel import engulfing, greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .measure_kernel import fit_round, next_round
 from .edges import MERGED, edge_ellipses, refine_centres
@@ -281,15 +280,9 @@ def _engulfing(x, y, major, minor) -> np.ndarray:
     the nose's specular highlight), where the larger's score may be the higher.
     """
     out = np.zeros(len(x), bool)
-    if len(x) < 2:
-        return out
-    pairs = cKDTree(np.column_stack([x, y])).query_pairs(float(0.5 * np.max(minor)), output_type="ndarray")
-    if len(pairs) == 0:
-        return out
-    i, j = pairs[:, 0], pairs[:, 1]
-    big, small = np.where(major[i] >= major[j], i, j), np.where(major[i] >= major[j], j, i)
-    hit = (major[big] > ENGULF * major[small]) & (np.hypot(x[big] - x[small], y[big] - y[small]) < 0.5 * minor[big])
-    out[big[hit]] = True
+    # Of every pair closer than half the largest minor axis (swept in x order, compiled).
+    engulfing(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64),
+              np.ascontiguousarray(major, np.float64), np.ascontiguousarray(minor, np.float64), float(ENGULF), out)
     return out
 
 

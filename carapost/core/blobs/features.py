@@ -122,10 +122,9 @@ def padded_level(lvl: np.ndarray, border: int, work: Workspace | None = None, ke
     if work is None:
         return cv2.copyMakeBorder(lvl, border, border, border, border, cv2.BORDER_REPLICATE).astype(np.float32)
     shape = (lvl.shape[0] + 2 * border, lvl.shape[1] + 2 * border)
-    pad8 = cv2.copyMakeBorder(lvl, border, border, border, border, cv2.BORDER_REPLICATE,
-                              dst=work.image(("pad8", key), shape, np.uint8))
     out = work.image(("pad", key), shape)
-    np.copyto(out, pad8)
+    # copyMakeBorder and the float32 copy in one pass.
+    ck.pad_level(np.ascontiguousarray(lvl, np.uint8), int(border), out)
     return out
 
 
