@@ -336,18 +336,54 @@ def _conic_axes(z, x0, y0):
 
 
 @njit(**JIT)
+def _kth(a, n, q):
+    """The ``q``-th smallest of ``a[:n]`` (no NaN), by partitioning ``a`` in place (quickselect)."""
+    lo, hi = 0, n - 1
+    while lo < hi:
+        pivot = a[(lo + hi) >> 1]
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        # a[lo:j+1] <= pivot <= a[i:hi+1]; between them, the pivot's value.
+        if q <= j:
+            hi = j
+        elif q >= i:
+            lo = i
+        else:
+            return a[q]
+    return a[q]
+
+
+@njit(**JIT)
 def _median_of_used(r, w):
-    """The (lower) median of ``r`` where the weight ``w`` is positive; infinity when none is."""
+    """The (lower) median of ``r`` where the weight ``w`` is positive; infinity when none is.
+
+    As ``np.sort`` of those values then the middle one (NaN sorted last), by selection.
+    """
     vals = np.empty(len(r))
     k = 0
+    nan = 0
     for i in range(len(r)):
         if w[i] > 0.0:
-            vals[k] = r[i]
-            k += 1
-    vals = np.sort(vals[:k])
-    if len(vals) == 0:
+            x = r[i]
+            if x != x:
+                nan += 1
+            else:
+                vals[k] = x
+                k += 1
+    if k + nan == 0:
         return np.inf
-    return vals[(len(vals) - 1) // 2]
+    q = (k + nan - 1) // 2
+    if q >= k:
+        return np.nan
+    return _kth(vals, k, q)
 
 
 @njit(**JIT)
