@@ -185,7 +185,9 @@ def profile_radius(F: np.ndarray) -> np.ndarray:
 
     The profile ``(centre - ring_k) / contrast`` rises from 0 at the centre to
     1 in the surround; the radius is where it crosses 0.5, linearly
-    interpolated between the ring radii.
+    interpolated between the ring radii.  The detector uses the compiled
+    :func:`.candidate_kernel.profile_radius` (the same arithmetic, to the bit;
+    ``tests/test_blob_measure_kernel.py``).
     """
     radii = np.array([0.0, 1.5, 2.5, 3.6])
     prof = np.concatenate([np.zeros((len(F), 1), np.float32), F[:, 1:4]], 1)
