@@ -291,22 +291,67 @@ def _conic_fit(u, v, w, scale, res):
     return x0, y0, ok
 
 
-@njit(**JIT)
-def _conic_solve(u, v, w, scale, res):
-    """:func:`_conic_fit` that also returns the conic's coefficients ``(A, B, C, D, E, F)``."""
-    S = np.zeros((6, 6))
-    m = np.empty(6)
+#: The options of :func:`_scatter`: no ``fastmath`` (its sums stay in the points' order).
+JIT_EXACT = dict(cache=True, nogil=True)
+
+
+@njit(**JIT_EXACT)
+def _scatter(u, v, w, S):
+    """The conic fit's 6x6 scatter matrix of the points ``(u, v)`` whose weight ``w`` (0 or 1) is 1, into ``S``.
+
+    The sum over the points of ``m m^T``, ``m = (u^2, u v, v^2, u, v, 1)``: its upper
+    triangle (the matrix is symmetric: ``m_i m_j == m_j m_i`` exactly) in 21 running
+    sums kept in registers, each in the points' order: the same sums, operation for
+    operation, as accumulating into the matrix did, at a third of the time.  Inlined
+    into :func:`_conic_solve` (``reassoc``), a plain loop was vectorised and its sums
+    reordered (other last bits); the loop's exit on a negative weight (there is none)
+    keeps it a scalar loop.
+    """
+    s00 = s01 = s02 = s03 = s04 = s05 = s11 = s12 = s13 = s14 = s15 = 0.0
+    s22 = s23 = s24 = s25 = s33 = s34 = s35 = s44 = s45 = s55 = 0.0
     for k in range(len(u)):
+        if w[k] < 0.0:
+            break       # never (weights are 0 or 1): a loop with an exit is not vectorised
         if w[k] == 0.0:
             continue
-        m[0], m[1], m[2], m[3], m[4], m[5] = u[k] * u[k], u[k] * v[k], v[k] * v[k], u[k], v[k], 1.0
-        # The upper triangle only: the matrix is symmetric (m_i m_j == m_j m_i exactly).
-        for i in range(6):
-            for j in range(i, 6):
-                S[i, j] += m[i] * m[j]
+        m0, m1, m2, m3, m4 = u[k] * u[k], u[k] * v[k], v[k] * v[k], u[k], v[k]
+        s00 += m0 * m0
+        s01 += m0 * m1
+        s02 += m0 * m2
+        s03 += m0 * m3
+        s04 += m0 * m4
+        s05 += m0 * 1.0
+        s11 += m1 * m1
+        s12 += m1 * m2
+        s13 += m1 * m3
+        s14 += m1 * m4
+        s15 += m1 * 1.0
+        s22 += m2 * m2
+        s23 += m2 * m3
+        s24 += m2 * m4
+        s25 += m2 * 1.0
+        s33 += m3 * m3
+        s34 += m3 * m4
+        s35 += m3 * 1.0
+        s44 += m4 * m4
+        s45 += m4 * 1.0
+        s55 += 1.0 * 1.0
+    S[0, 0], S[0, 1], S[0, 2], S[0, 3], S[0, 4], S[0, 5] = s00, s01, s02, s03, s04, s05
+    S[1, 1], S[1, 2], S[1, 3], S[1, 4], S[1, 5] = s11, s12, s13, s14, s15
+    S[2, 2], S[2, 3], S[2, 4], S[2, 5] = s22, s23, s24, s25
+    S[3, 3], S[3, 4], S[3, 5] = s33, s34, s35
+    S[4, 4], S[4, 5] = s44, s45
+    S[5, 5] = s55
     for i in range(6):
         for j in range(i):
             S[i, j] = S[j, i]
+
+
+@njit(**JIT)
+def _conic_solve(u, v, w, scale, res):
+    """:func:`_conic_fit` that also returns the conic's coefficients ``(A, B, C, D, E, F)``."""
+    S = np.empty((6, 6))
+    _scatter(u, v, w, S)
     z = _smallest_eigenvector(S)
     A, B, C, D, E, F = z[0], z[1], z[2], z[3], z[4], z[5]
     det = 4.0 * A * C - B * B
