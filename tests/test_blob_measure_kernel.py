@@ -221,8 +221,21 @@ def test_detections_equal_those_of_the_numpy_paths(frames, monkeypatch):
                 out[i][k] = v
         return tuple(out)
 
+    def fit_round_ref(img, hp, w, h, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
+        # fit_candidates' numpy glue before it was compiled (measure_kernel.fit_round), on a padded copy.
+        hp = centre.WINDOWS[-1]
+        pad = cv2.copyMakeBorder(img, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
+        ix = np.clip(np.rint(cx[todo]).astype(np.int64), 0, w - 1)
+        iy = np.clip(np.rint(cy[todo]).astype(np.int64), 0, h - 1)
+        res = measure_at_ref(pad, ix + hp, iy + hp, centre.window_for(rr[todo]), rr[todo], noise, passes)
+        out[0][todo], out[1][todo] = ix + res[0], iy + res[1]
+        for i in (2, 3, 4):
+            out[i][todo] = res[i]
+        ok[todo] = res[5]
+        extra[todo] = res[6]
+
     new = [det.detect(image, white=white) for white, image in frames]
-    monkeypatch.setattr(det, "measure_at", measure_at_ref)
+    monkeypatch.setattr(det, "fit_round", fit_round_ref)
     monkeypatch.setattr(fe, "features", features_reference)
     monkeypatch.setattr(fe, "candidates", candidates_reference)
     monkeypatch.setattr(fe, "noise_sigma", noise_sigma_reference)
@@ -234,3 +247,21 @@ def test_detections_equal_those_of_the_numpy_paths(frames, monkeypatch):
         np.testing.assert_allclose(a["y"], b["y"], atol=1e-3)
         np.testing.assert_allclose(a["major"], b["major"], atol=1e-3)
         np.testing.assert_allclose(a["score"], b["score"], atol=1e-4)
+
+
+def test_the_compiled_profile_radius_is_numpys_to_the_bit(frames):
+    """``candidate_kernel.profile_radius`` (the candidates' radii) is ``features.profile_radius`` times 2^level."""
+    rng = np.random.default_rng(2)
+    F = rng.normal(0.4, 0.4, (20000, len(fe.FEATURE_NAMES))).astype(np.float32)
+    F[::97, 2] = np.nan
+    F[::89, 1] = np.nan
+    level = rng.integers(1, 5, len(F)).astype(np.int8)
+    cases = [(F, level)]
+    for white, image in frames:
+        cand, _ = find_candidates(as_grey_u8(image), white, 4.0, 50.0)
+        cases.append((cand.feats, cand.level))
+        assert cand.radius.tobytes() == (fe.profile_radius(cand.feats) * 2.0 ** cand.level).tobytes()
+    for F, level in cases:
+        out = np.empty(len(F))
+        ck.profile_radius(F, level, out)
+        assert out.tobytes() == (fe.profile_radius(F) * 2.0 ** level).tobytes()

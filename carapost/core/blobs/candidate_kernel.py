@@ -237,3 +237,85 @@ def greedy_nms(x, y, rad, order, use_max, extra):
             if dx * dx + dy * dy < lim * lim:
                 alive[j] = False
     return alive
+
+
+@njit(**JIT_EXACT)
+def _max_nan(a, b):
+    """``np.maximum(a, b)`` of two scalars: NaN if either is NaN."""
+    return a if (a >= b) | (a != a) else b
+
+
+@njit(**JIT_EXACT)
+def profile_radius(F, level, out):
+    """Half-contrast radius (full-resolution px) of each candidate from its profile features ``F[:, 1:4]``.
+
+    Step 2, the radius estimate (:func:`.features.profile_radius`, which documents it), times
+    ``2 ** level``: numpy's float32 arithmetic operation for operation (the profile and the
+    interpolation's fraction are float32, the radius float64), so the result is the same to the bit.
+    Writes ``out``.
+    """
+    r1, r2, r3 = 1.5, 2.5, 3.6
+    zero = np.float32(0.0)
+    half = np.float32(0.5)
+    tiny = np.float32(1e-6)
+    for c in range(F.shape[0]):
+        # The clipped profile's running maximum (numpy's maximum: NaN stays NaN).
+        p1 = _max_nan(zero, _max_nan(F[c, 1], zero))
+        p2 = _max_nan(p1, _max_nan(F[c, 2], zero))
+        p3 = _max_nan(p2, _max_nan(F[c, 3], zero))
+        r = 3.6
+        if p1 >= half:
+            t = (half - zero) / _max_nan(p1 - zero, tiny)
+            r = 0.0 + np.float64(t) * (r1 - 0.0)
+        elif p2 >= half:
+            t = (half - p1) / _max_nan(p2 - p1, tiny)
+            r = r1 + np.float64(t) * (r2 - r1)
+        elif p3 >= half:
+            t = (half - p2) / _max_nan(p3 - p2, tiny)
+            r = r2 + np.float64(t) * (r3 - r2)
+        out[c] = min(max(r, 0.7), 3.6) * 2.0 ** level[c]
+
+
+@njit(**JIT_EXACT)
+def engulfing(x, y, major, minor, ratio, out):
+    """Mark in ``out`` the points with a point of under ``1 / ratio`` their major axis within half their minor axis.
+
+    Step 4's dot measured together with what it touches
+    (:func:`carapost.core.blobs.detector._engulfing`): of every two points closer
+    than half the largest minor axis, the larger (by ``major``) is marked when its
+    major axis is over ``ratio`` times the other's and the other's centre lies
+    closer than half its own minor axis.  Points are swept in x order.
+    """
+    n = len(x)
+    if n < 2:
+        return
+    reach = 0.0
+    for i in range(n):
+        reach = max(reach, minor[i])
+    reach = 0.5 * reach
+    by_x = np.argsort(x)
+    for p in range(n):
+        i = by_x[p]
+        for q in range(p + 1, n):
+            j = by_x[q]
+            if x[j] - x[i] > reach:
+                break
+            big, small = (i, j) if major[i] >= major[j] else (j, i)
+            if major[big] > ratio * major[small] and math.hypot(x[big] - x[small], y[big] - y[small]) < 0.5 * minor[big]:
+                out[big] = True
+
+
+@njit(**JIT_EXACT)
+def pad_level(lvl, border, out):
+    """``lvl`` (uint8) as float32 in ``out``, its edge replicated ``border`` px (``cv2.BORDER_REPLICATE``)."""
+    H, W = lvl.shape
+    for i in range(H + 2 * border):
+        src = lvl[min(max(i - border, 0), H - 1)]
+        dst = out[i]
+        v0, v1 = np.float32(src[0]), np.float32(src[W - 1])
+        for j in range(border):
+            dst[j] = v0
+            dst[W + border + j] = v1
+        row = dst[border:border + W]
+        for j in range(W):
+            row[j] = np.float32(src[j])

@@ -18,14 +18,14 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from ..heap import keep_freed_memory
 from . import features as fe
-from .candidate_kernel import greedy_nms
-from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, measure_at, window_for
+from .candidate_kernel import engulfing, greedy_nms, profile_radius
+from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
+from .measure_kernel import fit_round, next_round
 from .edges import MERGED, edge_ellipses, refine_centres
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
@@ -109,8 +109,10 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
                           bool(white)), bright
     F = np.concatenate(f_all)
     lv = np.concatenate(lv_all)
-    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv,
-                      fe.profile_radius(F) * 2.0 ** lv, noise, F, bool(white)), bright
+    # fe.profile_radius(F) * 2.0 ** lv, compiled (the same float32 and float64 arithmetic).
+    radius = np.empty(len(F))
+    profile_radius(F, lv, radius)
+    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv, radius, noise, F, bool(white)), bright
 
 
 #: Rounds of measurement; each re-centres the window on the last answer and sizes it by the last major axis.
@@ -120,14 +122,7 @@ ROUNDS = 3
 GROW = 1.15
 
 
-def padded(bright: np.ndarray) -> np.ndarray:
-    """``bright`` with a replicated border of the largest measurement window's half-size (``WINDOWS[-1]``)."""
-    hp = WINDOWS[-1]
-    return cv2.copyMakeBorder(bright, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
-
-
-def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float,
-                   pad: np.ndarray | None = None):
+def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float):
     """Steps 3-4: centre and ellipse of each candidate; returns full-resolution (x, y, major, minor, angle, ok, extra).
 
     ``extra`` is ``(N, len(MEASURE_NAMES))`` (:func:`.centre.measure`).  Up to
@@ -137,29 +132,25 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     elongated blob is often two candidates (the ends of its major axis): after the
     first round, answers closer than half the larger minor axis are one blob, and
     only the one whose candidate was nearest its answer is measured on (the others
-    are not ``ok``).  ``pad`` is :func:`padded` of ``bright`` when the caller has it.
+    are not ``ok``).  Windows reaching past the image's edge replicate it.
     """
     n = len(x)
-    out = [np.zeros(n, np.float64) for _ in range(5)]
+    out = np.zeros((5, n), np.float64)
     ok = np.zeros(n, bool)
     extra = np.zeros((n, len(MEASURE_NAMES)))
     if n == 0:
         return (*out, ok, extra)
-    hp = WINDOWS[-1]
-    pad = padded(bright) if pad is None else pad
     h, w = bright.shape
     cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
     todo = np.arange(n)
+    consts = _constants()
+    windows = np.asarray(WINDOWS, np.int64)
+    # The windows that reach past the image's edge replicate it (no padded copy of the frame).
+    img = np.ascontiguousarray(bright)
     for rnd in range(ROUNDS):
-        win = window_for(rr[todo])
-        ix = np.clip(np.rint(cx[todo]).astype(np.int64), 0, w - 1)
-        iy = np.clip(np.rint(cy[todo]).astype(np.int64), 0, h - 1)
-        res = measure_at(pad, ix + hp, iy + hp, win, rr[todo], noise, PASSES if rnd == 0 else 2)
-        out[0][todo], out[1][todo] = ix + res[0], iy + res[1]
-        for i in (2, 3, 4):
-            out[i][todo] = res[i]
-        ok[todo] = res[5]
-        extra[todo] = res[6]
+        # Windows about (cx, cy) sized by rr (window_for), measured (measure_at), compiled.
+        fit_round(img, 0, w, h, cx, cy, rr, todo, float(noise), PASSES if rnd == 0 else 2, windows, BORDER,
+                  consts, out, ok, extra)
         if rnd == 0:
             # A candidate outside the blob it led to belongs to something else (a neighbour's
             # measurement took it in): it must not win the merge below.
@@ -168,13 +159,11 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
             good = np.flatnonzero(ok)
             # Of one blob's candidates, the one nearest the answer (its window was the best centred).
             keep = good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]
-            ok[np.setdiff1d(good, keep)] = False
-        t = todo[ok[todo]]
-        r_new = np.clip(GROW * 0.5 * out[2][t], 1.0, WINDOWS[-1] - BORDER)
-        moved = np.hypot(out[0][t] - cx[t], out[1][t] - cy[t])
-        again = t[(moved > 0.5) | (np.abs(r_new - rr[t]) > 0.1 * rr[t])]
-        cx[t], cy[t], rr[t] = out[0][t], out[1][t], r_new
-        todo = again
+            ok[good] = False
+            ok[keep] = True
+        # The ok ones whose centre moved over half a pixel or whose weights' radius
+        # clip(GROW * major / 2, 1, WINDOWS[-1] - BORDER) changed by over a tenth; (cx, cy, rr) updated.
+        todo = next_round(todo, ok, out, cx, cy, rr, GROW * 0.5, 1.0, WINDOWS[-1] - BORDER)
         if len(todo) == 0:
             break
     return (*out, ok, extra)
@@ -222,7 +211,7 @@ GROWN = 1.5
 
 
 def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, ang, ok, extra,
-                    among=None, pad=None) -> np.ndarray:
+                    among=None) -> np.ndarray:
     """Fits drawn off their candidate's dot are replaced by the dot's own edge ellipse (in place).
 
     The intensity measurement weighs every pixel of its window, so a small dot
@@ -233,8 +222,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     and the candidate's is (:func:`.edges.edge_ellipses`), the candidate's
     edge ellipse is the blob; its stage-2 measurements are taken again in a
     window about it (one solve, whose centre is not used).  Only fits in ``among``
-    (all by default) are looked at; ``pad`` is :func:`padded` of ``bright`` when the
-    caller has it.  Returns which fits were replaced.
+    (all by default) are looked at.  Returns which fits were replaced.
     """
     r0 = cand.radius[sel]
     grown = 0.5 * major > GROWN * r0
@@ -263,16 +251,17 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     idx, e = idx[good], e[good]
     if len(idx) == 0:
         return rescued
-    hp = WINDOWS[-1]
-    pad = padded(bright) if pad is None else pad
     h, w = bright.shape
-    ix = np.clip(np.rint(e[:, 0]).astype(np.int64), 0, w - 1)
-    iy = np.clip(np.rint(e[:, 1]).astype(np.int64), 0, h - 1)
+    m = len(idx)
+    # One solve in a window about each edge ellipse (fit_candidates' round, compiled; its centre is not used).
     rr = np.clip(GROW * 0.5 * e[:, 2], 1.0, WINDOWS[-1] - BORDER)
-    res = measure_at(pad, ix + hp, iy + hp, window_for(rr), rr, cand.noise, 1)
+    ok_e, extra_e = np.zeros(m, bool), np.zeros((m, len(MEASURE_NAMES)))
+    fit_round(np.ascontiguousarray(bright), 0, w, h, np.ascontiguousarray(e[:, 0]), np.ascontiguousarray(e[:, 1]),
+              rr, np.arange(m), float(cand.noise), 1, np.asarray(WINDOWS, np.int64), BORDER, _constants(),
+              np.zeros((5, m)), ok_e, extra_e)
     x[idx], y[idx], major[idx], minor[idx], ang[idx] = e[:, 0], e[:, 1], e[:, 2], e[:, 3], e[:, 4]
-    ok[idx] = res[5]
-    extra[idx] = res[6]
+    ok[idx] = ok_e
+    extra[idx] = extra_e
     rescued[idx] = True
     return rescued
 
@@ -291,15 +280,9 @@ def _engulfing(x, y, major, minor) -> np.ndarray:
     the nose's specular highlight), where the larger's score may be the higher.
     """
     out = np.zeros(len(x), bool)
-    if len(x) < 2:
-        return out
-    pairs = cKDTree(np.column_stack([x, y])).query_pairs(float(0.5 * np.max(minor)), output_type="ndarray")
-    if len(pairs) == 0:
-        return out
-    i, j = pairs[:, 0], pairs[:, 1]
-    big, small = np.where(major[i] >= major[j], i, j), np.where(major[i] >= major[j], j, i)
-    hit = (major[big] > ENGULF * major[small]) & (np.hypot(x[big] - x[small], y[big] - y[small]) < 0.5 * minor[big])
-    out[big[hit]] = True
+    # Of every pair closer than half the largest minor axis (swept in x order, compiled).
+    engulfing(np.ascontiguousarray(x, np.float64), np.ascontiguousarray(y, np.float64),
+              np.ascontiguousarray(major, np.float64), np.ascontiguousarray(minor, np.float64), float(ENGULF), out)
     return out
 
 
@@ -353,9 +336,8 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     # One blob is usually a candidate on two or three octaves: fit it once, from the
     # finest octave's candidate (closest to the centre; coarse ones start pixels off).
     sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
-    pad = padded(bright)
     x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
-                                                         cand.noise, pad)
+                                                         cand.noise)
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     among = None
     if model.stage2 is not None:
@@ -363,7 +345,7 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
         # search costs ~50 us a candidate; most drifted candidates are coarse octaves' of a clean blob).
         p0 = model.stage2.predict(_fit_features(cand, sel, logit1, x, y, major, minor, extra, np.zeros(len(sel))))
         among = ~(ok & (p0 >= RESCUE_ABOVE) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
-    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among, pad)
+    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among)
     # The centre may wander to a neighbour: the candidate must stay inside the blob found.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)

@@ -122,10 +122,9 @@ def padded_level(lvl: np.ndarray, border: int, work: Workspace | None = None, ke
     if work is None:
         return cv2.copyMakeBorder(lvl, border, border, border, border, cv2.BORDER_REPLICATE).astype(np.float32)
     shape = (lvl.shape[0] + 2 * border, lvl.shape[1] + 2 * border)
-    pad8 = cv2.copyMakeBorder(lvl, border, border, border, border, cv2.BORDER_REPLICATE,
-                              dst=work.image(("pad8", key), shape, np.uint8))
     out = work.image(("pad", key), shape)
-    np.copyto(out, pad8)
+    # copyMakeBorder and the float32 copy in one pass.
+    ck.pad_level(np.ascontiguousarray(lvl, np.uint8), int(border), out)
     return out
 
 
@@ -186,7 +185,9 @@ def profile_radius(F: np.ndarray) -> np.ndarray:
 
     The profile ``(centre - ring_k) / contrast`` rises from 0 at the centre to
     1 in the surround; the radius is where it crosses 0.5, linearly
-    interpolated between the ring radii.
+    interpolated between the ring radii.  The detector uses the compiled
+    :func:`.candidate_kernel.profile_radius` (the same arithmetic, to the bit;
+    ``tests/test_blob_measure_kernel.py``).
     """
     radii = np.array([0.0, 1.5, 2.5, 3.6])
     prof = np.concatenate([np.zeros((len(F), 1), np.float32), F[:, 1:4]], 1)

@@ -368,9 +368,10 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
     """Measure blobs in windows of ``img`` centred on pixels ``(ix, iy)``, half-sizes ``hs``.
 
     Step 3 for every blob of a frame (one call per round): copies each window
-    (``img`` must be padded by the largest half-size) and runs
+    (where one reaches past the image's edge, the edge replicated) and runs
     :func:`measure_one`.  ``out`` is ``(N, 6)``, ``extra`` ``(N, 9)``.
     """
+    H, W = img.shape
     hmax = 1
     for k in range(len(hs)):
         hmax = max(hmax, hs[k])
@@ -391,10 +392,88 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
                 for j in range(n - 1):
                     GX[i * (n - 1) + j] = j - h + 0.5
                     GY[i * (n - 1) + j] = i - h + 0.5
-        x0 = ix[k] - h
-        for i in range(n):
-            src = img[iy[k] - h + i, x0:x0 + n]
-            dst = P[i * n:i * n + n]
-            for j in range(n):
-                dst[j] = src[j]
+        x0, y0 = ix[k] - h, iy[k] - h
+        if x0 >= 0 and y0 >= 0 and x0 + n <= W and y0 + n <= H:
+            for i in range(n):
+                src = img[y0 + i, x0:x0 + n]
+                dst = P[i * n:i * n + n]
+                for j in range(n):
+                    dst[j] = src[j]
+        else:
+            # A window reaching past the image's edge: the edge replicated (as cv2.BORDER_REPLICATE pads).
+            for i in range(n):
+                src = img[min(max(y0 + i, 0), H - 1)]
+                dst = P[i * n:i * n + n]
+                for j in range(n):
+                    dst[j] = src[min(max(x0 + j, 0), W - 1)]
         measure_one(h, max(float(r0[k]), 1.0), noise, passes, c, S, out[k], extra[k])
+
+
+#: The options of the round glue below: no ``fastmath`` (numpy's arithmetic, operation for operation).
+JIT_EXACT = dict(cache=True, nogil=True)
+
+
+@njit(**JIT_EXACT)
+def fit_round(img, hp, w, h, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
+    """One round of :func:`carapost.core.blobs.detector.fit_candidates` for the blobs ``todo`` (in place).
+
+    Each blob's window is centred on its pixel nearest ``(cx, cy)`` (clipped to the
+    ``w x h`` image; ``img`` is that image padded by ``hp``, or ``hp`` is 0 and the
+    windows' edges are replicated), sized by ``rr``
+    (:func:`carapost.core.blobs.centre.window_for`), and measured (:func:`measure_at`
+    with the radius as float32, as :func:`carapost.core.blobs.centre.measure_at`
+    passes it); writes the full-resolution ``out[0:5, k]`` (x, y, major, minor, angle),
+    ``ok[k]`` and ``extra[k]``, as the numpy glue did, operation for operation.
+    """
+    m = len(todo)
+    ix = np.empty(m, np.int64)
+    iy = np.empty(m, np.int64)
+    half = np.empty(m, np.int64)
+    r = np.empty(m)
+    nw = len(windows)
+    for q in range(m):
+        k = todo[q]
+        need = math.ceil(rr[k] + border + 0.5)
+        s = 0
+        while s < nw and windows[s] < need:
+            s += 1
+        half[q] = windows[min(s, nw - 1)]
+        ix[q] = min(max(np.int64(np.rint(cx[k])), 0), w - 1) + hp
+        iy[q] = min(max(np.int64(np.rint(cy[k])), 0), h - 1) + hp
+        r[q] = np.float64(np.float32(rr[k]))
+    res = np.zeros((m, 6))
+    ext = np.zeros((m, extra.shape[1]))
+    measure_at(img, ix, iy, half, r, noise, passes, c, res, ext)
+    for q in range(m):
+        k = todo[q]
+        out[0, k] = np.float64(ix[q] - hp) + res[q, 0]
+        out[1, k] = np.float64(iy[q] - hp) + res[q, 1]
+        out[2, k] = res[q, 2]
+        out[3, k] = res[q, 3]
+        out[4, k] = res[q, 4]
+        ok[k] = res[q, 5] > 0.5
+        for j in range(extra.shape[1]):
+            extra[k, j] = ext[q, j]
+
+
+@njit(**JIT_EXACT)
+def next_round(todo, ok, out, cx, cy, rr, grow_half, r_lo, r_hi):
+    """The blobs of ``todo`` measured again (:func:`carapost.core.blobs.detector.fit_candidates`).
+
+    Of the ``ok`` ones, those whose centre moved over half a pixel or whose weights'
+    radius ``clip(grow_half * major, r_lo, r_hi)`` changed by over a tenth; every
+    ``ok`` one's ``(cx, cy, rr)`` becomes its answer (in place).
+    """
+    again = np.empty(len(todo), np.int64)
+    na = 0
+    for q in range(len(todo)):
+        k = todo[q]
+        if not ok[k]:
+            continue
+        r_new = min(max(grow_half * out[2, k], r_lo), r_hi)
+        moved = math.hypot(out[0, k] - cx[k], out[1, k] - cy[k])
+        if (moved > 0.5) | (abs(r_new - rr[k]) > 0.1 * rr[k]):
+            again[na] = k
+            na += 1
+        cx[k], cy[k], rr[k] = out[0, k], out[1, k], r_new
+    return again[:na]
