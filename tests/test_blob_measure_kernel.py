@@ -221,8 +221,9 @@ def test_detections_equal_those_of_the_numpy_paths(frames, monkeypatch):
                 out[i][k] = v
         return tuple(out)
 
-    def fit_round_ref(img, hp, w, h, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
+    def fit_round_ref(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
         # fit_candidates' numpy glue before it was compiled (measure_kernel.fit_round), on a padded copy.
+        h, w = img.shape
         hp = centre.WINDOWS[-1]
         pad = cv2.copyMakeBorder(img, hp, hp, hp, hp, cv2.BORDER_REPLICATE)
         ix = np.clip(np.rint(cx[todo]).astype(np.int64), 0, w - 1)

@@ -16,12 +16,9 @@ import math
 import numpy as np
 from numba import njit
 
-from .measure_kernel import JIT
-
-
-#: The options of :func:`dog_peaks`: no ``fastmath`` (nothing to vectorise there needs it, and the
-#: sub-pixel offsets must be numpy's float32 arithmetic, operation for operation).
-JIT_EXACT = dict(cache=True, nogil=True)
+# JIT_EXACT for dog_peaks and the other numpy twins: nothing to vectorise there needs fastmath, and the
+# sub-pixel offsets must be numpy's float32 arithmetic, operation for operation.
+from .measure_kernel import JIT, JIT_EXACT
 
 
 @njit(**JIT_EXACT)

@@ -120,6 +120,18 @@ ROUNDS = 3
 #: The weights' radius for the next round, over the measured semi-major axis (a margin: a taper
 #: that cuts the edge measures the blob smaller than it is, and would keep doing so).
 GROW = 1.15
+#: The measurement's window half-sizes and constants, as the compiled round takes them.
+_WINDOWS = np.asarray(WINDOWS, np.int64)
+_CONSTANTS = _constants()
+
+
+def _measure_round(img, cx, cy, rr, todo, noise, passes, out, ok, extra):
+    """Blobs ``todo`` measured in windows about ``(cx, cy)`` sized by ``rr`` (compiled: window_for, measure_at).
+
+    Windows reaching past the image's edge replicate it (no padded copy of the frame).  Writes
+    ``out[0:5]``, ``ok`` and ``extra`` at ``todo``.
+    """
+    fit_round(img, cx, cy, rr, todo, float(noise), passes, _WINDOWS, BORDER, _CONSTANTS, out, ok, extra)
 
 
 def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float):
@@ -140,17 +152,11 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     extra = np.zeros((n, len(MEASURE_NAMES)))
     if n == 0:
         return (*out, ok, extra)
-    h, w = bright.shape
     cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
     todo = np.arange(n)
-    consts = _constants()
-    windows = np.asarray(WINDOWS, np.int64)
-    # The windows that reach past the image's edge replicate it (no padded copy of the frame).
     img = np.ascontiguousarray(bright)
     for rnd in range(ROUNDS):
-        # Windows about (cx, cy) sized by rr (window_for), measured (measure_at), compiled.
-        fit_round(img, 0, w, h, cx, cy, rr, todo, float(noise), PASSES if rnd == 0 else 2, windows, BORDER,
-                  consts, out, ok, extra)
+        _measure_round(img, cx, cy, rr, todo, noise, PASSES if rnd == 0 else 2, out, ok, extra)
         if rnd == 0:
             # A candidate outside the blob it led to belongs to something else (a neighbour's
             # measurement took it in): it must not win the merge below.
@@ -251,14 +257,12 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     idx, e = idx[good], e[good]
     if len(idx) == 0:
         return rescued
-    h, w = bright.shape
     m = len(idx)
-    # One solve in a window about each edge ellipse (fit_candidates' round, compiled; its centre is not used).
+    # One solve in a window about each edge ellipse (fit_candidates' round; its centre is not used).
     rr = np.clip(GROW * 0.5 * e[:, 2], 1.0, WINDOWS[-1] - BORDER)
     ok_e, extra_e = np.zeros(m, bool), np.zeros((m, len(MEASURE_NAMES)))
-    fit_round(np.ascontiguousarray(bright), 0, w, h, np.ascontiguousarray(e[:, 0]), np.ascontiguousarray(e[:, 1]),
-              rr, np.arange(m), float(cand.noise), 1, np.asarray(WINDOWS, np.int64), BORDER, _constants(),
-              np.zeros((5, m)), ok_e, extra_e)
+    _measure_round(np.ascontiguousarray(bright), np.ascontiguousarray(e[:, 0]), np.ascontiguousarray(e[:, 1]), rr,
+                   np.arange(m), cand.noise, 1, np.zeros((5, m)), ok_e, extra_e)
     x[idx], y[idx], major[idx], minor[idx], ang[idx] = e[:, 0], e[:, 1], e[:, 2], e[:, 3], e[:, 4]
     ok[idx] = ok_e
     extra[idx] = extra_e

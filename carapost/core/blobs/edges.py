@@ -39,7 +39,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .measure_kernel import JIT
+from .measure_kernel import JIT, JIT_EXACT
 
 #: Normals sampled around each ellipse.
 RAYS = 48
@@ -291,11 +291,7 @@ def _conic_fit(u, v, w, scale, res):
     return x0, y0, ok
 
 
-#: The options of :func:`_scatter`: no ``fastmath`` (its sums stay in the points' order).
-JIT_EXACT = dict(cache=True, nogil=True)
-
-
-@njit(**JIT_EXACT)
+@njit(**JIT_EXACT)                     # no fastmath: its sums stay in the points' order
 def _scatter(u, v, w, S):
     """The conic fit's 6x6 scatter matrix of the points ``(u, v)`` whose weight ``w`` (0 or 1) is 1, into ``S``.
 

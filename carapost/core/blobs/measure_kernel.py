@@ -29,6 +29,8 @@ from numba import njit
 
 #: Options of every kernel (see the module's docstring).
 JIT = dict(cache=True, nogil=True, fastmath={"reassoc"})
+#: Options of the kernels that must do numpy's arithmetic operation for operation (no ``fastmath``).
+JIT_EXACT = dict(cache=True, nogil=True)
 
 
 @njit(**JIT)
@@ -409,22 +411,18 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
         measure_one(h, max(float(r0[k]), 1.0), noise, passes, c, S, out[k], extra[k])
 
 
-#: The options of the round glue below: no ``fastmath`` (numpy's arithmetic, operation for operation).
-JIT_EXACT = dict(cache=True, nogil=True)
-
-
 @njit(**JIT_EXACT)
-def fit_round(img, hp, w, h, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
+def fit_round(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
     """One round of :func:`carapost.core.blobs.detector.fit_candidates` for the blobs ``todo`` (in place).
 
     Each blob's window is centred on its pixel nearest ``(cx, cy)`` (clipped to the
-    ``w x h`` image; ``img`` is that image padded by ``hp``, or ``hp`` is 0 and the
-    windows' edges are replicated), sized by ``rr``
+    image; where a window reaches past the image's edge, the edge is replicated), sized by ``rr``
     (:func:`carapost.core.blobs.centre.window_for`), and measured (:func:`measure_at`
     with the radius as float32, as :func:`carapost.core.blobs.centre.measure_at`
     passes it); writes the full-resolution ``out[0:5, k]`` (x, y, major, minor, angle),
     ``ok[k]`` and ``extra[k]``, as the numpy glue did, operation for operation.
     """
+    h, w = img.shape
     m = len(todo)
     ix = np.empty(m, np.int64)
     iy = np.empty(m, np.int64)
@@ -438,16 +436,16 @@ def fit_round(img, hp, w, h, cx, cy, rr, todo, noise, passes, windows, border, c
         while s < nw and windows[s] < need:
             s += 1
         half[q] = windows[min(s, nw - 1)]
-        ix[q] = min(max(np.int64(np.rint(cx[k])), 0), w - 1) + hp
-        iy[q] = min(max(np.int64(np.rint(cy[k])), 0), h - 1) + hp
+        ix[q] = min(max(np.int64(np.rint(cx[k])), 0), w - 1)
+        iy[q] = min(max(np.int64(np.rint(cy[k])), 0), h - 1)
         r[q] = np.float64(np.float32(rr[k]))
     res = np.zeros((m, 6))
     ext = np.zeros((m, extra.shape[1]))
     measure_at(img, ix, iy, half, r, noise, passes, c, res, ext)
     for q in range(m):
         k = todo[q]
-        out[0, k] = np.float64(ix[q] - hp) + res[q, 0]
-        out[1, k] = np.float64(iy[q] - hp) + res[q, 1]
+        out[0, k] = np.float64(ix[q]) + res[q, 0]
+        out[1, k] = np.float64(iy[q]) + res[q, 1]
         out[2, k] = res[q, 2]
         out[3, k] = res[q, 3]
         out[4, k] = res[q, 4]
