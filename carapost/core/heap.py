@@ -3,7 +3,7 @@
 glibc's ``malloc`` maps a block of more than 128 KB straight from the system
 (growing that limit to the largest block freed so far) and returns freed memory at
 the top of its heap once more than twice that is free.  Per-frame image work
-allocates and frees the same few 1 MB images (a 1280x720 frame, its padded copy,
+allocates and frees the same few 1 MB images (a 1280x720 frame, its inverse,
 pyramid levels, blurs) frame after frame, so with the defaults each was mapped,
 page-faulted in and unmapped again: ~500-800 page faults per frame of blob
 detection, ~1 ms of system time (measured), and the threads of Detect Blobs
