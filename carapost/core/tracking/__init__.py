@@ -3,7 +3,8 @@
 Modules: :mod:`.api` (the operations, returning one undoable command),
 :mod:`.engine` (one frame of tracking on arrays), :mod:`.geometry` (fast
 corrected-pixel projection, triangulation and pose refinement), :mod:`.assign`
-(candidate search and one-to-one matching), :mod:`.elastic` (neighbour
+(candidate search and one-to-one matching), :mod:`.vote` (the region's vote on
+a displacement when it changes speed at once), :mod:`.elastic` (neighbour
 prediction), :mod:`.patch` (grey-level patches), :mod:`.params`,
 :mod:`.synthetic_take` (moving synthetic takes with truth, for tests and
 benchmarks) and :mod:`.evaluate` (scoring against the truth).

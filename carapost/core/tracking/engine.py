@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
-from . import elastic, patch, reacquire
+from . import elastic, patch, reacquire, vote
 from .assign import candidates, mutual_best, size_change
 from .geometry import RigState, depth_uncertainty, held_out_errors, refine_poses, reprojection, triangulate
 from .params import TrackingParams
@@ -255,12 +255,15 @@ class FrameTracker:
             fd.free[fd.offsets[s] + det[valid[:, s], s]] = False
         return rig, det, uv_c, err
 
-    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3):
+    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None):
         """Candidates of ``slots`` (N, S) bool: pair arrays (point, sensor, local det, distance), nearest first.
 
-        ``taken`` (G,) bool marks detections already attached this frame.
+        ``taken`` (G,) bool marks detections already attached this frame; ``nudge`` (N, S, 2) moves the
+        projections of ``Xpred`` (:mod:`.vote`).
         """
         uv = rig.project(Xpred)
+        if nudge is not None:
+            uv = uv + nudge
         rows, sens = np.nonzero(slots & np.all(np.isfinite(uv), axis=2))
         e = np.zeros(0, int)
         if len(rows) == 0:
@@ -312,15 +315,19 @@ class FrameTracker:
         # that camera) waits for pass 2, so that it cannot take, by a nearer prediction, the blob of a
         # neighbour the camera kept seeing (a jaw dot turning out of view projects onto the next one).
         slots = have[:, None] & np.all(np.isfinite(self.uv_prev), axis=2)
-        Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2)
+        Pi, Si, Di, Dd, uv1 = self._search(fd, rig, Xp, radius, slots, taken, k=2)
+        fj, d1, second = self._first_two(Pi, Si, Dd)
+        # A region that changed speed at once (a jaw jerk) moves its predictions together first:
+        # the views whose nearest blob is off their prediction, with another in reach, go to the vote.
+        ask = np.zeros((N, S), bool)
+        ask[Pi[fj], Si[fj]] = (d1 > vote.ASK_PX) & np.isfinite(second)
+        if np.any(ask):
+            nudge = vote.nudges(uv1, slots, ask, fd, float(p.face_point_tracking_distance), self.nb, self.w)
+            if np.any(nudge):
+                Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2, nudge=nudge)
+                fj, d1, second = self._first_two(Pi, Si, Dd)
         if len(Pi):
             key = Pi * S + Si
-            # Rows come in (slot, nearest first) order: a slot's second candidate follows its first.
-            first = np.r_[True, key[1:] != key[:-1]]
-            fj = np.flatnonzero(first)
-            d1 = Dd[fj]
-            has2 = (fj + 1 < len(key)) & ~np.r_[first[1:], True][fj]
-            second = np.where(has2, Dd[np.minimum(fj + 1, len(key) - 1)], np.inf)
             conf = second >= CONFIDENT_RATIO * d1
             fi = fj[conf]
             gid = offsets[Si[fi]] + Di[fi]
@@ -488,6 +495,16 @@ class FrameTracker:
                            bdet, buv_raw, bscore, berr)
 
     # --------------------------------------------------------------- sub-steps
+    def _first_two(self, Pi, Si, Dd):
+        """Of :meth:`_search`'s rows (k=2): each slot's first row, its distance and the second's (inf none)."""
+        key = Pi * self.S + Si
+        # Rows come in (slot, nearest first) order: a slot's second candidate follows its first.
+        first = np.r_[True, key[1:] != key[:-1]] if len(key) else np.zeros(0, bool)
+        fj = np.flatnonzero(first)
+        has2 = (fj + 1 < len(key)) & ~np.r_[first[1:], True][fj]
+        second = np.where(has2, Dd[np.minimum(fj + 1, max(len(key) - 1, 0))], np.inf) if len(fj) else np.zeros(0)
+        return fj, Dd[fj], second
+
     def _predict(self, X, available, rows):
         """Elastic prediction of ``rows`` only (``X``, ``available``: every point)."""
         return elastic.predict(X, available, self.nb[rows], self.off[rows], weight=self.w[rows])[0]

@@ -1,0 +1,102 @@
+"""The neighbours' vote on each point's 2-D displacement, before the first matching pass.
+
+A point's constant-velocity prediction is wrong when its region changes speed
+at once: on a rendered take the jaw went from 1-2 to 7-9 mm a frame, every
+lower-lip, chin and jaw prediction landed 5-15 px short, and a blob nearer the
+prediction than the point's own was often the neighbour's ahead of it.  The
+ratio test cannot see that (the neighbour's blob is alone near the
+prediction), and neither can the anchor check: when every camera takes the
+neighbour's blob the views meet at the neighbour.
+
+What does see it is the region.  Its points moved together, so one
+displacement puts all of them on their blobs, while the displacement to a
+neighbour's blob puts the others on blobs only where the dots form a lattice.
+So, per camera, each point's candidate displacements (to its few nearest
+detections) are scored by how many of its neighbours have a detection at
+their own prediction plus that displacement; a point whose nearest detection
+is outvoted by a farther one clearly enough has its prediction moved onto that
+one (a *nudge*), and the usual checks follow.  Neighbours count by how steadily
+they have moved with the point (:func:`.elastic.weights`), so a lower lip
+listens to the chin rather than to the upper lip.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .assign import candidates
+
+#: Views with this many asked neighbours are asked too.
+UNREST = 2
+#: Candidate displacements per point and camera (its nearest detections).
+K_VOTE = 8
+#: Views whose nearest detection is within this (px) of the prediction are not put to the vote
+#: (constant velocity is right to a pixel or two but for a sudden change of speed).
+ASK_PX = 2.0
+#: A neighbour's displacement agrees with a candidate to this scale (px): the jaw's displacement
+#: changes by 3-5 px across a region of six neighbours (lower lip 11-14 px, chin 7-10).
+AGREE_PX = 5.0
+#: A farther candidate wins only with this much more support than the nearest (in neighbours)...
+MARGIN = 0.5
+#: ...and at least this much support besides the point's own.
+MIN_SUPPORT = 1.5
+
+
+def nudges(uv: np.ndarray, slots: np.ndarray, ask: np.ndarray, fd, radius: float, nb: np.ndarray,
+           weight: np.ndarray) -> np.ndarray:
+    """2-D corrections (N, S, 2) of the predicted projections ``uv`` the region's vote asks for (0: none).
+
+    Parameters
+    ----------
+    uv : ndarray (N, S, 2)
+        Predicted corrected pixels of each point in each camera.
+    slots : ndarray (N, S) bool
+        The views that may vote (seen on the previous frame).
+    ask : ndarray (N, S) bool
+        The views put to the vote (their nearest blob is more than :data:`ASK_PX` off, another is in reach);
+        with them, every view with :data:`UNREST` of them among its neighbours.
+    fd : FrameData
+        The frame's detections (free ones are candidates).
+    radius : float
+        Search radius (px): the Face Point Tracking Distance.
+    nb, weight : ndarray (N, K)
+        Each point's neighbours (-1 none) and their weights (:func:`.elastic.weights`).
+    """
+    N, S = slots.shape
+    out = np.zeros((N, S, 2))
+    slots = slots & np.all(np.isfinite(uv), axis=2)
+    ask = ask & slots
+    if not np.any(ask) or fd.tree() is None:
+        return out
+    # A view on a blob in a region that moved is asked too: the neighbour's blob may have landed on it.
+    around = np.where((nb >= 0)[:, :, None], ask[np.maximum(nb, 0)], False).sum(axis=1)
+    ask |= slots & (around >= UNREST)
+    # Candidates of the asked views and of their neighbours' views in the same camera.
+    need = ask.copy()
+    n, s = np.nonzero(ask)
+    nbr = nb[n]
+    has = nbr >= 0
+    need[nbr[has], np.broadcast_to(s[:, None], nbr.shape)[has]] = True
+    need &= slots
+    rows, sens = np.nonzero(need)
+    idx, _ = candidates(fd.tree(), fd.free, fd.shift(uv[rows, sens], sens), np.full(len(rows), radius), k=K_VOTE)
+    xy = np.concatenate(fd.xy)
+    off = np.full((N, S, K_VOTE, 2), np.nan)
+    off[rows, sens] = np.where((idx >= 0)[..., None], xy[np.maximum(idx, 0)] - uv[rows, sens][:, None], np.nan)
+    w = np.where(has, weight[n], 0.0)
+    w = w / np.maximum(w.max(axis=1, keepdims=True), 1e-12)             # the steadiest neighbour counts 1
+    # The prediction itself is candidate 0: where the neighbours sit on their blobs the region did not
+    # move, and a view without a blob of its own (hidden, undetected) must not be sent onto another dot.
+    mine = np.concatenate([np.zeros((len(n), 1, 2)), off[n, s]], axis=1)   # (g, 1 + K_VOTE, 2)
+    theirs = off[np.maximum(nbr, 0), s[:, None]]                          # (g, K, K_VOTE, 2)
+    dx = mine[:, None, :, None, 0] - theirs[:, :, None, :, 0]
+    dy = mine[:, None, :, None, 1] - theirs[:, :, None, :, 1]
+    d2 = np.fmin.reduce(dx * dx + dy * dy, axis=-1)                       # NaN only where no neighbour blob
+    agree = np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2))    # (g, K, 1 + K_VOTE)
+    support = np.einsum("gkc,gk->gc", agree, w)
+    support = np.where(np.isfinite(mine[..., 0]), support, -np.inf)
+    best = np.argmax(support, axis=1)
+    top = support[np.arange(len(n)), best]
+    # A farther blob must outvote both staying put and the nearest blob (what pass 1 would take).
+    win = (best > 1) & (top >= support[:, :2].max(axis=1) + MARGIN) & (top >= MIN_SUPPORT)
+    out[n[win], s[win]] = mine[win, best[win]]
+    return out
