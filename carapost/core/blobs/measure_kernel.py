@@ -54,15 +54,13 @@ def rows(c, reach, off, size):
 
 
 @njit(**JIT)
-def window_gradients(P, n, tmp, gx, gy, sums):
+def window_gradients(P, n, tmp, gx, gy):
     """Gradients on the half-pixel grid of the flat ``n x n`` window ``P``, each the 3x3 mean of its neighbours.
 
     Step 3, the radial-symmetry centre's lines: 2x2 differences (symmetric about
     each half-pixel point), then a 3x3 mean with the edge rows and columns
     replicated, which steadies each line's direction.  Fills the flat ``(n-1)^2``
-    ``gx``, ``gy`` (``tmp`` is ``(4, >= (n-1)^2)`` scratch) and ``sums = (sum gx,
-    sum gy, sum gx^2, sum gy^2)``: the window's gradient energy for any background
-    slope follows from them.
+    ``gx``, ``gy`` (``tmp`` is ``(4, >= (n-1)^2)`` scratch).
     """
     m = n - 1
     rx, ry, vx, vy = tmp[0], tmp[1], tmp[2], tmp[3]
@@ -99,6 +97,15 @@ def window_gradients(P, n, tmp, gx, gy, sums):
             oy[j] = (b[j] + b[j + 1] + b[j + 2]) * ninth
         gx[c + m - 1] = (vx[c + m - 2] + vx[c + m - 1] + vx[c + m - 1]) * ninth
         gy[c + m - 1] = (vy[c + m - 2] + vy[c + m - 1] + vy[c + m - 1]) * ninth
+
+
+@njit(**JIT)
+def gradient_sums(gx, gy, m, sums):
+    """``sums = (sum gx, sum gy, sum gx^2, sum gy^2)`` over the flat ``m x m`` gradients (:func:`window_gradients`).
+
+    The window's gradient energy for any background slope follows from them
+    (the ``edge_share`` measurement).
+    """
     sx = sy = sxx = syy = 0.0
     gxa, gya = gx[:m * m], gy[:m * m]
     for k in range(m * m):
@@ -245,7 +252,7 @@ def measure_one(h, r, noise, passes, c, S, out):
     scratch whose rows 0-2 hold the flat window and its pixels' x and y
     (row-major, relative to its centre pixel) and rows 6-7 the half-pixel grid's
     x and y; on return its rows 3-5 hold the background-subtracted window and the
-    gradients, and row 12 the plane and the gradient sums.  Writes ``out = (x, y,
+    gradients, and row 12 the plane.  Writes ``out = (x, y,
     major, minor, angle, ok)``.
     """
     t_in, t_out, ring_in, ring_out, slope_k, mix = c[0], c[1], c[2], c[3], c[4], c[5]
@@ -257,8 +264,7 @@ def measure_one(h, r, noise, passes, c, S, out):
     plane = small[0:3]
     sol = small[3:5]
     mom = small[5:11]
-    gsum = small[11:15]
-    window_gradients(P, n, S[8:12], gx0, gy0, gsum)
+    window_gradients(P, n, S[8:12], gx0, gy0)
     plane[:] = 0.0
     sol[:] = 0.0
     px = py = 0.0           # the centre the last solve's weights (and ring) were about
@@ -329,6 +335,7 @@ def measure_extra(h, r, noise, c, S, state, extra):
     X, Y, D, gx0, gy0, GX, GY, small = S[1], S[2], S[3], S[4], S[5], S[6], S[7], S[12]
     b0, b1, b2 = small[0], small[1], small[2]
     gsum = small[11:15]
+    gradient_sums(gx0, gy0, m, gsum)
     # The core: q < core_q inside the moment ellipse (q = 1 on a uniform ellipse's edge).  Its
     # rows lie within sqrt(4 core_q myy) of the centre (more when the determinant was floored).
     mdet = max(det, 1e-6)
