@@ -79,11 +79,13 @@ def window_gradients(P, n, tmp, gx, gy):
         u = max(i - 1, 0) * m
         c = i * m
         d = min(i + 1, m - 1) * m
-        ru, rc, rd = rx[u:u + m], rx[c:c + m], rx[d:d + m]
-        su, sc, sd = ry[u:u + m], ry[c:c + m], ry[d:d + m]
-        vxi, vyi = vx[c:c + m], vy[c:c + m]
+        # One output per loop: with two, the loop read six rows and wrote two that might overlap them,
+        # more pairs than LLVM tests at run time, and it was not vectorised.
+        ru, rc, rd, vxi = rx[u:u + m], rx[c:c + m], rx[d:d + m], vx[c:c + m]
         for j in range(m):
             vxi[j] = ru[j] + rc[j] + rd[j]
+        su, sc, sd, vyi = ry[u:u + m], ry[c:c + m], ry[d:d + m], vy[c:c + m]
+        for j in range(m):
             vyi[j] = su[j] + sc[j] + sd[j]
     ninth = 1.0 / 9.0
     for i in range(m):
@@ -94,6 +96,7 @@ def window_gradients(P, n, tmp, gx, gy):
         ox, oy = gx[c + 1:c + m - 1], gy[c + 1:c + m - 1]
         for j in range(m - 2):
             ox[j] = (a[j] + a[j + 1] + a[j + 2]) * ninth
+        for j in range(m - 2):
             oy[j] = (b[j] + b[j + 1] + b[j + 2]) * ninth
         gx[c + m - 1] = (vx[c + m - 2] + vx[c + m - 1] + vx[c + m - 1]) * ninth
         gy[c + m - 1] = (vy[c + m - 2] + vy[c + m - 1] + vy[c + m - 1]) * ninth
