@@ -221,7 +221,7 @@ def test_detections_equal_those_of_the_numpy_paths(frames, monkeypatch):
                 out[i][k] = v
         return tuple(out)
 
-    def fit_round_ref(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
+    def fit_round_ref(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra, again):
         # fit_candidates' numpy glue before it was compiled (measure_kernel.fit_round), on a padded copy.
         h, w = img.shape
         hp = centre.WINDOWS[-1]

@@ -125,9 +125,12 @@ def candidate_features(lvl, g, ys, xs, dog, level, noise, rings, ring_ptr, secto
     P = np.empty(npx)
     for c in range(len(ys)):
         y, x = ys[c], xs[c]
+        # The patch's rows as slices, indexed by the loop counter (no wrap-around test per pixel).
         for i in range(n):
+            src = lvl[y + i - R, x - R:x + R + 1]
+            dst = P[i * n:i * n + n]
             for j in range(n):
-                P[i * n + j] = lvl[y + i - R, x + j - R]
+                dst[j] = src[j]
         _group_means(P, rings, ring_ptr, rm)
         _group_means(P, sectors, sector_ptr, sm)
         centre = rm[0]

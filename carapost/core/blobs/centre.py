@@ -65,7 +65,7 @@ def window_for(radius: np.ndarray) -> np.ndarray:
 
 
 def _constants() -> np.ndarray:
-    """The kernel's constants, in :func:`.measure_kernel.measure_one`'s order."""
+    """The kernel's constants, in :func:`.measure_kernel.measure_one`'s (and ``measure_extra``'s) order."""
     return np.array([TAPER_IN, TAPER_OUT, RING[0], RING[1], SLOPE_K, MIX, CORE * CORE], np.float64)
 
 
@@ -103,7 +103,8 @@ def measure_at(img: np.ndarray, ix: np.ndarray, iy: np.ndarray, half: np.ndarray
     r = np.asarray(r0, np.float32).astype(np.float64)
     out = np.zeros((n, 6))
     extra = np.zeros((n, len(MEASURE_NAMES)))
-    measure_kernel.measure_at(img, ix, iy, half, r, float(noise), int(passes), _constants(), out, extra)
+    measure_kernel.measure_at(img, ix, iy, half, r, float(noise), int(passes), _constants(), out, extra,
+                              np.zeros((n, 3)), np.zeros(0))
     return out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4], out[:, 5] > 0.5, extra
 
 

@@ -123,15 +123,21 @@ GROW = 1.15
 #: The measurement's window half-sizes and constants, as the compiled round takes them.
 _WINDOWS = np.asarray(WINDOWS, np.int64)
 _CONSTANTS = _constants()
+#: The next round's weights' radius clip(GROW * major / 2, 1, WINDOWS[-1] - BORDER), as the compiled test
+#: of which blobs are measured again takes it (:func:`.measure_kernel.measured_again`).
+_AGAIN = np.array([GROW * 0.5, 1.0, WINDOWS[-1] - BORDER])
+_LAST = np.zeros(0)
 
 
-def _measure_round(img, cx, cy, rr, todo, noise, passes, out, ok, extra):
+def _measure_round(img, cx, cy, rr, todo, noise, passes, out, ok, extra, last=True):
     """Blobs ``todo`` measured in windows about ``(cx, cy)`` sized by ``rr`` (compiled: window_for, measure_at).
 
     Windows reaching past the image's edge replicate it (no padded copy of the frame).  Writes
-    ``out[0:5]``, ``ok`` and ``extra`` at ``todo``.
+    ``out[0:5]``, ``ok`` and ``extra`` at ``todo``; unless ``last``, ``extra`` is NaN for the blobs
+    that another round measures again (or that are not ``ok`` after the first round's merge).
     """
-    fit_round(img, cx, cy, rr, todo, float(noise), passes, _WINDOWS, BORDER, _CONSTANTS, out, ok, extra)
+    fit_round(img, cx, cy, rr, todo, float(noise), passes, _WINDOWS, BORDER, _CONSTANTS, out, ok, extra,
+              _LAST if last else _AGAIN)
 
 
 def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndarray, noise: float):
@@ -144,7 +150,9 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     elongated blob is often two candidates (the ends of its major axis): after the
     first round, answers closer than half the larger minor axis are one blob, and
     only the one whose candidate was nearest its answer is measured on (the others
-    are not ``ok``).  Windows reaching past the image's edge replicate it.
+    are not ``ok``).  Windows reaching past the image's edge replicate it.  A blob's
+    stage-2 measurements are taken in its last round only: where the merge made it
+    not ``ok`` after they were skipped, its ``extra`` row is NaN.
     """
     n = len(x)
     out = np.zeros((5, n), np.float64)
@@ -156,7 +164,8 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     todo = np.arange(n)
     img = np.ascontiguousarray(bright)
     for rnd in range(ROUNDS):
-        _measure_round(img, cx, cy, rr, todo, noise, PASSES if rnd == 0 else 2, out, ok, extra)
+        # The stage-2 measurements of a blob measured again are the next round's.
+        _measure_round(img, cx, cy, rr, todo, noise, PASSES if rnd == 0 else 2, out, ok, extra, rnd == ROUNDS - 1)
         if rnd == 0:
             # A candidate outside the blob it led to belongs to something else (a neighbour's
             # measurement took it in): it must not win the merge below.
@@ -169,7 +178,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
             ok[keep] = True
         # The ok ones whose centre moved over half a pixel or whose weights' radius
         # clip(GROW * major / 2, 1, WINDOWS[-1] - BORDER) changed by over a tenth; (cx, cy, rr) updated.
-        todo = next_round(todo, ok, out, cx, cy, rr, GROW * 0.5, 1.0, WINDOWS[-1] - BORDER)
+        todo = next_round(todo, ok, out, cx, cy, rr, _AGAIN)
         if len(todo) == 0:
             break
     return (*out, ok, extra)

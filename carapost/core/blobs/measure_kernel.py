@@ -54,15 +54,13 @@ def rows(c, reach, off, size):
 
 
 @njit(**JIT)
-def window_gradients(P, n, tmp, gx, gy, sums):
+def window_gradients(P, n, tmp, gx, gy):
     """Gradients on the half-pixel grid of the flat ``n x n`` window ``P``, each the 3x3 mean of its neighbours.
 
     Step 3, the radial-symmetry centre's lines: 2x2 differences (symmetric about
     each half-pixel point), then a 3x3 mean with the edge rows and columns
     replicated, which steadies each line's direction.  Fills the flat ``(n-1)^2``
-    ``gx``, ``gy`` (``tmp`` is ``(4, >= (n-1)^2)`` scratch) and ``sums = (sum gx,
-    sum gy, sum gx^2, sum gy^2)``: the window's gradient energy for any background
-    slope follows from them.
+    ``gx``, ``gy`` (``tmp`` is ``(4, >= (n-1)^2)`` scratch).
     """
     m = n - 1
     rx, ry, vx, vy = tmp[0], tmp[1], tmp[2], tmp[3]
@@ -81,11 +79,13 @@ def window_gradients(P, n, tmp, gx, gy, sums):
         u = max(i - 1, 0) * m
         c = i * m
         d = min(i + 1, m - 1) * m
-        ru, rc, rd = rx[u:u + m], rx[c:c + m], rx[d:d + m]
-        su, sc, sd = ry[u:u + m], ry[c:c + m], ry[d:d + m]
-        vxi, vyi = vx[c:c + m], vy[c:c + m]
+        # One output per loop: with two, the loop read six rows and wrote two that might overlap them,
+        # more pairs than LLVM tests at run time, and it was not vectorised.
+        ru, rc, rd, vxi = rx[u:u + m], rx[c:c + m], rx[d:d + m], vx[c:c + m]
         for j in range(m):
             vxi[j] = ru[j] + rc[j] + rd[j]
+        su, sc, sd, vyi = ry[u:u + m], ry[c:c + m], ry[d:d + m], vy[c:c + m]
+        for j in range(m):
             vyi[j] = su[j] + sc[j] + sd[j]
     ninth = 1.0 / 9.0
     for i in range(m):
@@ -96,9 +96,19 @@ def window_gradients(P, n, tmp, gx, gy, sums):
         ox, oy = gx[c + 1:c + m - 1], gy[c + 1:c + m - 1]
         for j in range(m - 2):
             ox[j] = (a[j] + a[j + 1] + a[j + 2]) * ninth
+        for j in range(m - 2):
             oy[j] = (b[j] + b[j + 1] + b[j + 2]) * ninth
         gx[c + m - 1] = (vx[c + m - 2] + vx[c + m - 1] + vx[c + m - 1]) * ninth
         gy[c + m - 1] = (vy[c + m - 2] + vy[c + m - 1] + vy[c + m - 1]) * ninth
+
+
+@njit(**JIT)
+def gradient_sums(gx, gy, m, sums):
+    """``sums = (sum gx, sum gy, sum gx^2, sum gy^2)`` over the flat ``m x m`` gradients (:func:`window_gradients`).
+
+    The window's gradient energy for any background slope follows from them
+    (the ``edge_share`` measurement).
+    """
     sx = sy = sxx = syy = 0.0
     gxa, gya = gx[:m * m], gy[:m * m]
     for k in range(m * m):
@@ -234,32 +244,30 @@ def inside_moments(D, X, Y, h, a, cx, cy, reach, inv, mom):
 
 
 @njit(**JIT)
-def measure_one(h, r, noise, passes, c, S, out, extra):
-    """Centre, ellipse and the stage-2 measurements of one blob.
+def measure_one(h, r, noise, passes, c, S, out):
+    """Centre and ellipse of one blob; returns what :func:`measure_extra` continues from.
 
-    Step 3 end to end (see :func:`carapost.core.blobs.centre.measure`, whose
-    outputs these are): ``passes`` plane + lines solves, each about the last
-    answer; the contrast; the 0.3 lines + 0.7 inside-map centroid blend; the
-    moments about the blend -> ellipse; then the edge and core measurements.
-    ``c`` holds the constants ``(TAPER_IN, TAPER_OUT, RING_IN, RING_OUT,
-    SLOPE_K, MIX, CORE_Q)``.  ``S`` is ``(13, >= (2h+1)^2)`` scratch whose rows
-    0-2 hold the flat window and its pixels' x and y (row-major, relative to
-    its centre pixel) and rows 6-7 the half-pixel grid's x and y.  Writes ``out = (x, y, major, minor, angle, ok)`` and
-    ``extra`` (the order of ``MEASURE_NAMES``).
+    Step 3 (see :func:`carapost.core.blobs.centre.measure`, whose outputs these
+    are): ``passes`` plane + lines solves, each about the last answer; the
+    contrast; the 0.3 lines + 0.7 inside-map centroid blend; the moments about
+    the blend -> ellipse.  ``c`` holds the constants ``(TAPER_IN, TAPER_OUT,
+    RING_IN, RING_OUT, SLOPE_K, MIX, CORE_Q)``.  ``S`` is ``(13, >= (2h+1)^2)``
+    scratch whose rows 0-2 hold the flat window and its pixels' x and y
+    (row-major, relative to its centre pixel) and rows 6-7 the half-pixel grid's
+    x and y; on return its rows 3-5 hold the background-subtracted window and the
+    gradients, and row 12 the plane.  Writes ``out = (x, y,
+    major, minor, angle, ok)``.
     """
-    t_in, t_out, ring_in, ring_out, slope_k, mix, core_q = c[0], c[1], c[2], c[3], c[4], c[5], c[6]
+    t_in, t_out, ring_in, ring_out, slope_k, mix = c[0], c[1], c[2], c[3], c[4], c[5]
     inv = 1.0 / (t_out - t_in)
     reach = r + t_out
     n = 2 * h + 1
     npx = n * n
-    m = n - 1
-    mpx = m * m
     P, X, Y, D, gx0, gy0, GX, GY, small = S[0], S[1], S[2], S[3], S[4], S[5], S[6], S[7], S[12]
     plane = small[0:3]
     sol = small[3:5]
     mom = small[5:11]
-    gsum = small[11:15]
-    window_gradients(P, n, S[8:12], gx0, gy0, gsum)
+    window_gradients(P, n, S[8:12], gx0, gy0)
     plane[:] = 0.0
     sol[:] = 0.0
     px = py = 0.0           # the centre the last solve's weights (and ring) were about
@@ -306,6 +314,31 @@ def measure_one(h, r, noise, passes, c, S, out, extra):
     angle = 0.5 * math.degrees(math.atan2(2.0 * mxy, mxx - myy))
     angle = (angle + 90.0) % 180.0 - 90.0
     fill = m0 / max(math.pi * major * minor / 4.0, 1e-6)
+    out[0], out[1], out[2], out[3], out[4] = cx, cy, major, minor, angle
+    ok = (math.isfinite(cx) and math.isfinite(cy) and abs(cx) < h - 1.5 and abs(cy) < h - 1.5
+          and a_n > 0.5 * noise)
+    out[5] = 1.0 if ok else 0.0
+    return px, py, lx, ly, cx, cy, a, mxx, myy, mxy, det, border_std, fill
+
+
+@njit(**JIT)
+def measure_extra(h, r, noise, c, S, state, extra):
+    """The stage-2 measurements of the blob :func:`measure_one` just measured in ``S``; writes ``extra``.
+
+    Step 3's edge and core measurements (the order of ``MEASURE_NAMES``); ``state``
+    is what :func:`measure_one` returned.
+    """
+    px, py, lx, ly, cx, cy, a, mxx, myy, mxy, det, border_std, fill = state
+    t_in, t_out, core_q = c[0], c[1], c[6]
+    inv = 1.0 / (t_out - t_in)
+    reach = r + t_out
+    n = 2 * h + 1
+    m = n - 1
+    mpx = m * m
+    X, Y, D, gx0, gy0, GX, GY, small = S[1], S[2], S[3], S[4], S[5], S[6], S[7], S[12]
+    b0, b1, b2 = small[0], small[1], small[2]
+    gsum = small[11:15]
+    gradient_sums(gx0, gy0, m, gsum)
     # The core: q < core_q inside the moment ellipse (q = 1 on a uniform ellipse's edge).  Its
     # rows lie within sqrt(4 core_q myy) of the centre (more when the determinant was floored).
     mdet = max(det, 1e-6)
@@ -350,10 +383,6 @@ def measure_one(h, r, noise, passes, c, S, out, extra):
     line_rms = math.sqrt(wd2 / max(wg2_last, 1e-9))
     sharp = wg2 / max(wg, 1e-6) / a
     edge_share = wg2 / max(g2_all, 1e-6)
-    out[0], out[1], out[2], out[3], out[4] = cx, cy, major, minor, angle
-    ok = (math.isfinite(cx) and math.isfinite(cy) and abs(cx) < h - 1.5 and abs(cy) < h - 1.5
-          and a_n > 0.5 * noise)
-    out[5] = 1.0 if ok else 0.0
     extra[0] = a
     extra[1] = line_rms
     extra[2] = sharp
@@ -365,13 +394,31 @@ def measure_one(h, r, noise, passes, c, S, out, extra):
     extra[8] = core_std
 
 
+@njit(**JIT_EXACT)
+def measured_again(x, y, major, cx, cy, rr, again):
+    """Whether a blob measured at ``(x, y)`` in a window about ``(cx, cy)`` with weights' radius ``rr`` is measured again.
+
+    :func:`carapost.core.blobs.detector.fit_candidates`' test: its centre moved
+    over half a pixel or its next weights' radius ``clip(again[0] * major,
+    again[1], again[2])`` differs by over a tenth.  Returns ``(again, radius)``.
+    """
+    r_new = min(max(again[0] * major, again[1]), again[2])
+    moved = math.hypot(x - cx, y - cy)
+    return (moved > 0.5) | (abs(r_new - rr) > 0.1 * rr), r_new
+
+
 @njit(**JIT)
-def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
+def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra, start, again):
     """Measure blobs in windows of ``img`` centred on pixels ``(ix, iy)``, half-sizes ``hs``.
 
     Step 3 for every blob of a frame (one call per round): copies each window
     (where one reaches past the image's edge, the edge replicated) and runs
-    :func:`measure_one`.  ``out`` is ``(N, 6)``, ``extra`` ``(N, 9)``.
+    :func:`measure_one` and :func:`measure_extra`.  ``out`` is ``(N, 6)``, ``extra``
+    ``(N, 9)``.  With ``again`` (:func:`measured_again`'s constants; empty: none),
+    a blob that is ``ok`` and will be measured again from its window's start
+    ``start[k] = (x, y, weights' radius)`` (``img``'s pixels) is not given its
+    stage-2 measurements (its ``extra`` row is NaN): the next round's replace them,
+    or, where the first round's merge makes it not ``ok``, nothing uses them.
     """
     H, W = img.shape
     hmax = 1
@@ -408,11 +455,19 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra):
                 dst = P[i * n:i * n + n]
                 for j in range(n):
                     dst[j] = src[min(max(x0 + j, 0), W - 1)]
-        measure_one(h, max(float(r0[k]), 1.0), noise, passes, c, S, out[k], extra[k])
+        r = max(float(r0[k]), 1.0)
+        o = out[k]
+        state = measure_one(h, r, noise, passes, c, S, o)
+        if (len(again) and o[5] > 0.5
+                and measured_again(np.float64(ix[k]) + o[0], np.float64(iy[k]) + o[1], o[2], start[k, 0], start[k, 1],
+                                   start[k, 2], again)[0]):
+            extra[k, :] = np.nan
+        else:
+            measure_extra(h, r, noise, c, S, state, extra[k])
 
 
 @njit(**JIT_EXACT)
-def fit_round(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra):
+def fit_round(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok, extra, again):
     """One round of :func:`carapost.core.blobs.detector.fit_candidates` for the blobs ``todo`` (in place).
 
     Each blob's window is centred on its pixel nearest ``(cx, cy)`` (clipped to the
@@ -420,7 +475,9 @@ def fit_round(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok,
     (:func:`carapost.core.blobs.centre.window_for`), and measured (:func:`measure_at`
     with the radius as float32, as :func:`carapost.core.blobs.centre.measure_at`
     passes it); writes the full-resolution ``out[0:5, k]`` (x, y, major, minor, angle),
-    ``ok[k]`` and ``extra[k]``, as the numpy glue did, operation for operation.
+    ``ok[k]`` and ``extra[k]``, as the numpy glue did, operation for operation.  With
+    ``again`` (:func:`measured_again`'s constants), the ``extra`` of the blobs another
+    round will measure again is NaN (:func:`measure_at`).
     """
     h, w = img.shape
     m = len(todo)
@@ -428,6 +485,7 @@ def fit_round(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok,
     iy = np.empty(m, np.int64)
     half = np.empty(m, np.int64)
     r = np.empty(m)
+    start = np.empty((m, 3))
     nw = len(windows)
     for q in range(m):
         k = todo[q]
@@ -439,9 +497,10 @@ def fit_round(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok,
         ix[q] = min(max(np.int64(np.rint(cx[k])), 0), w - 1)
         iy[q] = min(max(np.int64(np.rint(cy[k])), 0), h - 1)
         r[q] = np.float64(np.float32(rr[k]))
+        start[q, 0], start[q, 1], start[q, 2] = cx[k], cy[k], rr[k]
     res = np.zeros((m, 6))
     ext = np.zeros((m, extra.shape[1]))
-    measure_at(img, ix, iy, half, r, noise, passes, c, res, ext)
+    measure_at(img, ix, iy, half, r, noise, passes, c, res, ext, start, again)
     for q in range(m):
         k = todo[q]
         out[0, k] = np.float64(ix[q]) + res[q, 0]
@@ -455,23 +514,21 @@ def fit_round(img, cx, cy, rr, todo, noise, passes, windows, border, c, out, ok,
 
 
 @njit(**JIT_EXACT)
-def next_round(todo, ok, out, cx, cy, rr, grow_half, r_lo, r_hi):
+def next_round(todo, ok, out, cx, cy, rr, again):
     """The blobs of ``todo`` measured again (:func:`carapost.core.blobs.detector.fit_candidates`).
 
-    Of the ``ok`` ones, those whose centre moved over half a pixel or whose weights'
-    radius ``clip(grow_half * major, r_lo, r_hi)`` changed by over a tenth; every
-    ``ok`` one's ``(cx, cy, rr)`` becomes its answer (in place).
+    Of the ``ok`` ones, those :func:`measured_again` says (``again`` its constants);
+    every ``ok`` one's ``(cx, cy, rr)`` becomes its answer (in place).
     """
-    again = np.empty(len(todo), np.int64)
+    redo = np.empty(len(todo), np.int64)
     na = 0
     for q in range(len(todo)):
         k = todo[q]
         if not ok[k]:
             continue
-        r_new = min(max(grow_half * out[2, k], r_lo), r_hi)
-        moved = math.hypot(out[0, k] - cx[k], out[1, k] - cy[k])
-        if (moved > 0.5) | (abs(r_new - rr[k]) > 0.1 * rr[k]):
-            again[na] = k
+        yes, r_new = measured_again(out[0, k], out[1, k], out[2, k], cx[k], cy[k], rr[k], again)
+        if yes:
+            redo[na] = k
             na += 1
         cx[k], cy[k], rr[k] = out[0, k], out[1, k], r_new
-    return again[:na]
+    return redo[:na]
