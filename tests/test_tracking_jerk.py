@@ -28,6 +28,12 @@ def _frame(xy):
     return FrameData(_IdentityRig(), [rec])
 
 
+def _asked(fd, pred):
+    """The views the frame tracker puts to the vote: nearest blob more than ``ASK_PX`` off, a second in reach."""
+    d = np.sort(np.hypot(*(fd.xy[0][None] - pred[:, None]).transpose(2, 0, 1)), axis=1)
+    return ((d[:, 0] > vote.ASK_PX) & (d[:, 1] <= 35.0))[:, None]
+
+
 def _region(rng, centre, n=7, spread=14.0, gap=9.0):
     """``n`` dots around ``centre`` at least ``gap`` px apart, irregular as painted dots are."""
     out = []
@@ -54,7 +60,7 @@ def test_a_region_that_jumped_is_moved_onto_its_own_blobs():
     assert np.count_nonzero(nearest != np.arange(7)) >= 3      # premise: the nearest blob is often another's
     uv = pred[:, None, :]
     slots = np.ones((14, 1), bool)
-    ask = (np.hypot(*(fd.xy[0][None] - pred[:, None]).transpose(2, 0, 1)).min(1) > vote.ASK_PX)[:, None]
+    ask = _asked(fd, pred)
     out = vote.nudges(uv, slots, ask, fd, 35.0, nb, np.ones(nb.shape))
     got = uv + out
     # Each moving dot whose own blob was not the nearest is now on it; the still dots did not move.
@@ -75,12 +81,15 @@ def test_unsteady_neighbours_are_outvoted_by_steady_ones():
     moved = np.concatenate([lip + jump, chin + jump, upper])
     # A stray dot 1 px from the lip's prediction: the nearest, and what pass 1 would take.
     fd = _frame(np.concatenate([moved, [[201.0, 300.0]]]))
-    nb = np.array([[1, 2, 3, 4, 5, 6]] + [[-1] * 6] * 6)
-    steady = np.array([[100.0, 100.0, 100.0, 1.0, 1.0, 1.0]] + [[1.0] * 6] * 6)
+    # Each dot's six neighbours are the other six; offsets within the jaw (lip and chin) and within the
+    # upper lip stayed steady, offsets across changed.
+    nb = np.array([[j for j in range(7) if j != i] for i in range(7)])
+    side = np.array([0, 0, 0, 0, 1, 1, 1])
+    steady = np.where(side[nb] == side[:, None], 100.0, 1.0)
     uv = pred[:, None, :]
     slots = np.ones((7, 1), bool)
-    ask = np.zeros((7, 1), bool)
-    ask[0] = True
+    ask = _asked(fd, pred)
+    assert ask[1:4].all()                           # the chin is asked (the lip for its neighbours' unrest)
     out = vote.nudges(uv, slots, ask, fd, 35.0, nb, steady)
     assert np.allclose(uv[0, 0] + out[0, 0], lip[0] + jump)
     out_even = vote.nudges(uv, slots, ask, fd, 35.0, nb, np.ones(nb.shape))

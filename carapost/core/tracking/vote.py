@@ -94,9 +94,24 @@ def nudges(uv: np.ndarray, slots: np.ndarray, ask: np.ndarray, fd, radius: float
     agree = np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2))    # (g, K, 1 + K_VOTE)
     support = np.einsum("gkc,gk->gc", agree, w)
     support = np.where(np.isfinite(mine[..., 0]), support, -np.inf)
+    # Round 2: each neighbour now votes for one displacement only, the one it believes in (its nearest
+    # blob, or its own round-1 choice if it was asked and its neighbours had a say).  Among the many blobs of a dense region some
+    # neighbour blob lies near almost any displacement; one vote each leaves chance nothing to add up.
+    belief = np.full((N, S, 2), np.nan)
+    belief[rows, sens] = off[rows, sens, 0]
+    first = np.argmax(support, axis=1)
+    said = support[np.arange(len(n)), first] > 0                          # else no neighbour had a word
+    belief[n[said], s[said]] = mine[np.flatnonzero(said), first[said]]
+    theirs = belief[np.maximum(nbr, 0), s[:, None]]                       # (g, K, 2)
+    d2 = np.sum((mine[:, None, :, :] - theirs[:, :, None, :]) ** 2, axis=-1)   # (g, K, 1 + K_VOTE)
+    agree = np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2))
+    support = np.einsum("gkc,gk->gc", agree, w)
+    support = np.where(np.isfinite(mine[..., 0]), support, -np.inf)
     best = np.argmax(support, axis=1)
     top = support[np.arange(len(n)), best]
-    # A farther blob must outvote both staying put and the nearest blob (what pass 1 would take).
-    win = (best > 1) & (top >= support[:, :2].max(axis=1) + MARGIN) & (top >= MIN_SUPPORT)
+    # A blob must outvote staying put, and a farther one the nearest blob too (what pass 1 would take).
+    # The nearest blob that wins is moved onto as well: 14 px off, the ratio test alone is a coin toss.
+    rival = np.where(best == 1, support[:, 0], support[:, :2].max(axis=1))
+    win = (best > 0) & (top >= rival + MARGIN) & (top >= MIN_SUPPORT)
     out[n[win], s[win]] = mine[win, best[win]]
     return out
