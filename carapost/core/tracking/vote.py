@@ -11,13 +11,16 @@ neighbour's blob the views meet at the neighbour.
 What does see it is the region.  Its points moved together, so one
 displacement puts all of them on their blobs, while the displacement to a
 neighbour's blob puts the others on blobs only where the dots form a lattice.
-So, per camera, each point's candidate displacements (to its few nearest
-detections) are scored by how many of its neighbours have a detection at
-their own prediction plus that displacement; a point whose nearest detection
-is outvoted by a farther one clearly enough has its prediction moved onto that
-one (a *nudge*), and the usual checks follow.  Neighbours count by how steadily
-they have moved with the point (:func:`.elastic.weights`), so a lower lip
-listens to the chin rather than to the upper lip.
+So, per camera, each point's candidate displacements (staying put, and to its
+few nearest detections) are scored by how many of its neighbours agree with
+them: first through any detection of theirs at their own prediction plus that
+displacement, then (the second round) through the one displacement each
+neighbour believes in, so that chance agreements in a dense region do not add
+up.  A detection that outvotes staying put clearly enough (a farther one the
+nearest as well) becomes the prediction (a *nudge*), and the usual checks
+follow.  Neighbours count by how steadily they have moved with the point
+(:func:`.elastic.weights`), so a lower lip listens to the chin rather than to
+the upper lip.
 """
 from __future__ import annotations
 
@@ -35,7 +38,8 @@ ASK_PX = 2.0
 #: A neighbour's displacement agrees with a candidate to this scale (px): the jaw's displacement
 #: changes by 3-5 px across a region of six neighbours (lower lip 11-14 px, chin 7-10).
 AGREE_PX = 5.0
-#: A farther candidate wins only with this much more support than the nearest (in neighbours)...
+#: A candidate wins only with this much more support (in neighbours) than staying put (a farther one
+#: than the nearest too)...
 MARGIN = 0.5
 #: ...and at least this much support besides the point's own.
 MIN_SUPPORT = 1.5
