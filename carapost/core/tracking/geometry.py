@@ -90,23 +90,35 @@ class RigState:
         return self.C[s], d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
+#: The upper triangle of a symmetric 3x3 matrix, in the order :func:`_solve3` reads it.
+_UPPER_I = np.array([0, 0, 0, 1, 1, 2])
+_UPPER_J = np.array([0, 1, 2, 1, 2, 2])
+
+
 def _view_equations(P: np.ndarray, uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each view's share of the weighted DLT normal equations: ``(n, S, 3, 3)`` and ``(n, S, 3)``.
+    """Each view's share of the weighted DLT normal equations: ``(6, S, n)`` and ``(3, S, n)``.
 
-    The rows of view s are u P3 - P1 and v P3 - P2, scaled by ``w[:, s]``.
+    The rows of view s are u P3 - P1 and v P3 - P2, scaled by ``w[:, s]``.  The
+    matrices are symmetric, so only their upper triangle (m00 m01 m02 m11 m12 m22)
+    is formed.  Components lead and points run along the last axis (with the 2x4
+    blocks innermost, every array operation would loop over 3 or 4 elements at a time).
     """
-    A = uv[..., :, None] * P[None, :, 2:3, :] - P[None, :, :2, :]          # (n, S, 2, 4)
-    A = A * w[..., None, None]
-    # Two rows per view: outer products written out (matmul on 2x3 blocks costs more per element).
-    r0, r1 = A[..., 0, :3], A[..., 1, :3]
-    M = r0[..., :, None] * r0[..., None, :] + r1[..., :, None] * r1[..., None, :]
-    return M, -(r0 * A[..., 0, 3:4] + r1 * A[..., 1, 3:4])
+    Pt = P.transpose(1, 2, 0)[..., None]                                     # (3, 4, S, 1)
+    A = uv.transpose(2, 1, 0)[:, None] * Pt[2] - Pt[:2]                      # (2, 4, S, n)
+    A *= w.T
+    r = A[:, :3]
+    m = r[:, _UPPER_I] * r[:, _UPPER_J]
+    b = r * A[:, 3:4]
+    return m[0] + m[1], -(b[0] + b[1])
 
 
-def _solve3(M: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve batched symmetric 3x3 systems ``M x = b`` by the adjugate (LAPACK costs more for tiny systems)."""
-    m00, m01, m02 = M[..., 0, 0], M[..., 0, 1], M[..., 0, 2]
-    m11, m12, m22 = M[..., 1, 1], M[..., 1, 2], M[..., 2, 2]
+def _solve3(m: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve batched symmetric 3x3 systems ``M x = b`` by the adjugate (LAPACK costs more for tiny systems).
+
+    ``m`` (6, ...) is the upper triangle of ``M`` (as from :func:`_view_equations`), ``b`` (3, ...);
+    returns ``x`` (..., 3), NaN where ``M`` is singular.
+    """
+    m00, m01, m02, m11, m12, m22 = m
     c00 = m11 * m22 - m12 * m12
     c01 = m02 * m12 - m01 * m22
     c02 = m01 * m12 - m02 * m11
@@ -114,7 +126,7 @@ def _solve3(M: np.ndarray, b: np.ndarray) -> np.ndarray:
     c12 = m01 * m02 - m00 * m12
     c22 = m00 * m11 - m01 * m01
     det = m00 * c00 + m01 * c01 + m02 * c02
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    b0, b1, b2 = b
     x = np.stack([c00 * b0 + c01 * b1 + c02 * b2,
                   c01 * b0 + c11 * b1 + c12 * b2,
                   c02 * b0 + c12 * b1 + c22 * b2], axis=-1)
@@ -196,9 +208,10 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
         X = triangulate(rig, uv_c, valid, weight)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
     M, b = _view_equations(P, uv, w)
-    Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)             # (N, S, 3) without view s
+    Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)   # (S, N, 3) without view s
     S = valid.shape[1]
-    proj = np.stack([rig.project(Xs[:, s])[:, s] for s in range(S)], axis=1)
+    proj = np.stack([rig.project(Xs[s])[:, s] for s in range(S)], axis=1)
+    Xs = Xs.transpose(1, 0, 2)
     err = np.where(valid, np.linalg.norm(proj - uv_c, axis=-1), -1.0)
     return np.nan_to_num(err, nan=-1.0), Xs
 
