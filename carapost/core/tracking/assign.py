@@ -41,12 +41,16 @@ def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius:
     i = i.reshape(len(i), kk)
     hit = np.isfinite(d) & (d <= radius[ok][:, None])
     hit[hit] &= free[i[hit]]
-    # Keep the first k hits of each row in order.
-    order = np.argsort(~hit, axis=1, kind="stable")[:, :k]
-    rows = np.arange(len(d))[:, None]
-    h = hit[rows, order]
-    sub_i = np.where(h, i[rows, order], -1)
-    sub_d = np.where(h, d[rows, order], np.inf)
+    if (hit[:, :-1] >= hit[:, 1:]).all():
+        # Usually no taken detection comes before a free one: the hits lead every row already.
+        h, sub_i, sub_d = hit[:, :k], i[:, :k], d[:, :k]
+    else:
+        # Keep the first k hits of each row in order.
+        order = np.argsort(~hit, axis=1, kind="stable")[:, :k]
+        rows = np.arange(len(d))[:, None]
+        h, sub_i, sub_d = hit[rows, order], i[rows, order], d[rows, order]
+    sub_i = np.where(h, sub_i, -1)
+    sub_d = np.where(h, sub_d, np.inf)
     if sub_i.shape[1] < k:
         pad = k - sub_i.shape[1]
         sub_i = np.pad(sub_i, ((0, 0), (0, pad)), constant_values=-1)

@@ -258,13 +258,14 @@ class FrameTracker:
             fd.free[fd.offsets[s] + det[valid[:, s], s]] = False
         return rig, det, uv_c, err
 
-    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None):
+    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None, uv=None):
         """Candidates of ``slots`` (N, S) bool: pair arrays (point, sensor, local det, distance), nearest first.
 
         ``taken`` (G,) bool marks detections already attached this frame; ``nudge`` (N, S, 2) moves the
-        projections of ``Xpred`` (:mod:`.vote`).
+        projections of ``Xpred`` (:mod:`.vote`); ``uv``: those projections, when already known.
         """
-        uv = rig.project(Xpred)
+        if uv is None:
+            uv = rig.project(Xpred)
         if nudge is not None:
             uv = uv + nudge
         rows, sens = np.nonzero(slots & np.all(np.isfinite(uv), axis=2))
@@ -327,7 +328,7 @@ class FrameTracker:
         if np.any(ask):
             nudge = vote.nudges(uv1, slots, ask, fd, float(p.face_point_tracking_distance), self.nb, self.w)
             if np.any(nudge):
-                Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2, nudge=nudge)
+                Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2, nudge=nudge, uv=uv1)
                 fj, d1, second = self._first_two(Pi, Si, Dd)
         if len(Pi):
             key = Pi * S + Si

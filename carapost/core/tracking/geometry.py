@@ -28,6 +28,14 @@ def rodrigues(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(ths) * K + (1 - np.cos(ths)) * (K @ K)
 
 
+def _dehomogenise(h: np.ndarray) -> np.ndarray:
+    """Pixels of homogeneous image points ``h`` (..., 3); NaN behind the camera."""
+    z = h[..., 2:3]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        uv = h[..., :2] / z
+    return np.where(z > 1e-6, uv, np.nan)
+
+
 class RigState:
     """Poses of the S cameras of one frame as arrays (R (S,3,3), C (S,3)) plus fixed intrinsics.
 
@@ -73,11 +81,12 @@ class RigState:
     def project(self, X: np.ndarray) -> np.ndarray:
         """Corrected pixels ``(N, S, 2)`` of world points ``X`` (N, 3); NaN behind a camera."""
         P = self.P()
-        h = (X @ P[:, :, :3].transpose(0, 2, 1) + P[:, None, :, 3]).transpose(1, 0, 2)
-        z = h[..., 2:3]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            uv = h[..., :2] / z
-        return np.where(z > 1e-6, uv, np.nan)
+        return _dehomogenise((X @ P[:, :, :3].transpose(0, 2, 1) + P[:, None, :, 3]).transpose(1, 0, 2))
+
+    def project_in(self, X: np.ndarray, s: int) -> np.ndarray:
+        """Corrected pixels ``(N, 2)`` of world points ``X`` (N, 3) in sensor ``s`` alone (as :meth:`project`)."""
+        P = self.P()[s]
+        return _dehomogenise(X @ P[:, :3].T + P[:, 3])
 
     def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
         """Raw pixels of sensor ``s`` to corrected pixels."""
@@ -133,6 +142,13 @@ def _solve3(m: np.ndarray, b: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         x /= det[..., None]
     return np.where(np.abs(det)[..., None] > 1e-300, x, np.nan)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` over the last axis (same arithmetic) without its axis bookkeeping, which costs more on small arrays."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -210,7 +226,7 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     M, b = _view_equations(P, uv, w)
     Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)   # (S, N, 3) without view s
     S = valid.shape[1]
-    proj = np.stack([rig.project(Xs[s])[:, s] for s in range(S)], axis=1)
+    proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
     Xs = Xs.transpose(1, 0, 2)
     err = np.where(valid, np.linalg.norm(proj - uv_c, axis=-1), -1.0)
     return np.nan_to_num(err, nan=-1.0), Xs
@@ -271,7 +287,7 @@ def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarr
         Jx[..., 1, 2] = -fa * y / z
         # d xc / d omega = -[xc]x, so Jx @ -[xc]x = cross(xc, rows of Jx); d xc / d C = -R.
         J = np.empty((S, N, 2, 6))
-        J[..., :3] = np.cross(xc[:, :, None, :], Jx)
+        J[..., :3] = _cross(xc[:, :, None, :], Jx)
         J[..., 3:] = -(Jx @ out.R[:, None])
         nr = np.sqrt(r[..., 0] ** 2 + r[..., 1] ** 2)
         w = np.where(good, np.sqrt(np.minimum(1.0, huber / np.maximum(nr, 1e-12))), 0.0)
