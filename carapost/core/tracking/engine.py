@@ -425,12 +425,10 @@ class FrameTracker:
             vall = np.concatenate([bdet >= 0, valid[multi]])
             rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
             X = triangulate(rig, uv_c, valid, confidence(src))
-            err = reprojection(rig, X, uv_c, valid)
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
         X, pred, clamped = self._steady_depth(rig, X, valid, measured)
         X = self._patch_depth(rig, X, uv_c, src, measured, motion)
-        err = reprojection(rig, X, uv_c, valid)
         if p.remove_bad_3d_points and np.any(measured):
             # Three or more agreeing blob views outweigh a prediction: a jaw speeding up from 3.6 to 9 mm a
             # frame put four views of a lower-lip dot 0.02 mm from the truth and 5.1 mm from the prediction.
@@ -444,7 +442,7 @@ class FrameTracker:
             alone = lost & ~np.all(np.isfinite(pred), axis=1)
             pred[alone] = Xp[alone]
             reach = np.where(alone, np.minimum(self.unseen + 1, LAST_SEEN_FRAMES), 1)
-            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back, pred, reach)
+            X, measured = self._remove_bad_3d(rig, X, uv_c, valid, src, det, measured, back, pred, reach)
             valid = src != SRC_NONE
         # 8. Single-sensor tracking of points seen by one sensor only.
         status = np.where(measured, ST_RECONSTRUCTED, ST_NONE).astype(np.uint8)
@@ -844,7 +842,7 @@ class FrameTracker:
         spread = 1.4826 * np.take_along_axis(dev, order, 1)[np.arange(len(rows)), half]
         return np.where(np.isfinite(spread) & (cw[:, -1] > 0), spread, 0.0)
 
-    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back, pred, reach=1):
+    def _remove_bad_3d(self, rig, X, uv_c, valid, src, det, measured, back, pred, reach=1):
         """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction.
 
         ``back`` rows (lost on the previous frame, now seen by 3+ agreeing cameras, or seen in 3+
@@ -868,20 +866,20 @@ class FrameTracker:
                     e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
                     d = np.linalg.norm(Xi - pred[i])
                     if d <= lim[i] and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:
-                        best, best_d = (s, Xi, e), d
+                        best, best_d = (s, Xi), d
             if best is not None:
-                s, Xi, e = best
+                s, Xi = best
                 valid[i, s] = False
                 src[i, s] = SRC_NONE
                 uv_c[i, s] = np.nan
-                X[i], err[i] = Xi, e
+                X[i] = Xi
             else:
                 valid[i] = False
                 src[i] = SRC_NONE
                 uv_c[i] = np.nan
                 X[i] = np.nan
                 measured[i] = False
-        return X, err, measured
+        return X, measured
 
     def _single_sensor(self, rig, X, measured, uv_c, valid, one):
         """Points on the ray of their one sample, at the depth nearest the neighbours' prediction."""

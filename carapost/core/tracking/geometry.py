@@ -99,11 +99,6 @@ class RigState:
         return self.C[s], d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-#: The upper triangle of a symmetric 3x3 matrix, in the order :func:`_solve3` reads it.
-_UPPER_I = np.array([0, 0, 0, 1, 1, 2])
-_UPPER_J = np.array([0, 1, 2, 1, 2, 2])
-
-
 def _view_equations(P: np.ndarray, uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each view's share of the weighted DLT normal equations: ``(6, S, n)`` and ``(3, S, n)``.
 
@@ -115,10 +110,14 @@ def _view_equations(P: np.ndarray, uv: np.ndarray, w: np.ndarray) -> tuple[np.nd
     Pt = P.transpose(1, 2, 0)[..., None]                                     # (3, 4, S, 1)
     A = uv.transpose(2, 1, 0)[:, None] * Pt[2] - Pt[:2]                      # (2, 4, S, n)
     A *= w.T
-    r = A[:, :3]
-    m = r[:, _UPPER_I] * r[:, _UPPER_J]
-    b = r * A[:, 3:4]
-    return m[0] + m[1], -(b[0] + b[1])
+    # Both rows' products, the upper triangle then the right-hand side, written in place.
+    prod = np.empty((2, 9) + A.shape[2:])
+    np.multiply(A[:, 0:1], A[:, 0:3], out=prod[:, 0:3])
+    np.multiply(A[:, 1:2], A[:, 1:3], out=prod[:, 3:5])
+    np.multiply(A[:, 2], A[:, 2], out=prod[:, 5])
+    np.multiply(A[:, :3], A[:, 3:4], out=prod[:, 6:])
+    total = prod[0] + prod[1]
+    return total[:6], -total[6:]
 
 
 def _solve3(m: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -128,20 +127,32 @@ def _solve3(m: np.ndarray, b: np.ndarray) -> np.ndarray:
     returns ``x`` (..., 3), NaN where ``M`` is singular.
     """
     m00, m01, m02, m11, m12, m22 = m
-    c00 = m11 * m22 - m12 * m12
-    c01 = m02 * m12 - m01 * m22
-    c02 = m01 * m12 - m02 * m11
-    c11 = m00 * m22 - m02 * m02
-    c12 = m01 * m02 - m00 * m12
-    c22 = m00 * m11 - m01 * m01
-    det = m00 * c00 + m01 * c01 + m02 * c02
+    # In place where a temporary would only be added to (the same arithmetic, fewer allocations).
+    c00 = m11 * m22
+    c00 -= m12 * m12
+    c01 = m02 * m12
+    c01 -= m01 * m22
+    c02 = m01 * m12
+    c02 -= m02 * m11
+    c11 = m00 * m22
+    c11 -= m02 * m02
+    c12 = m01 * m02
+    c12 -= m00 * m12
+    c22 = m00 * m11
+    c22 -= m01 * m01
+    det = m00 * c00
+    det += m01 * c01
+    det += m02 * c02
     b0, b1, b2 = b
-    x = np.stack([c00 * b0 + c01 * b1 + c02 * b2,
-                  c01 * b0 + c11 * b1 + c12 * b2,
-                  c02 * b0 + c12 * b1 + c22 * b2], axis=-1)
+    x = np.empty(det.shape + (3,))
     with np.errstate(divide="ignore", invalid="ignore"):
-        x /= det[..., None]
-    return np.where(np.abs(det)[..., None] > 1e-300, x, np.nan)
+        for i, (p, q, r) in enumerate(((c00, c01, c02), (c01, c11, c12), (c02, c12, c22))):
+            xi = p * b0
+            xi += q * b1
+            xi += r * b2
+            np.divide(xi, det, out=x[..., i])
+    x[~(np.abs(det) > 1e-300)] = np.nan
+    return x
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -274,17 +285,18 @@ def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarr
         xc = (Xf[None] - out.C[:, None]) @ out.R.transpose(0, 2, 1)           # (S, N, 3)
         z = np.where(np.abs(xc[..., 2]) > 1e-6, xc[..., 2], 1e-6)
         x, y = xc[..., 0] / z, xc[..., 1] / z
+        u, v = f * x + k * y, fa * y
         r = np.empty((S, N, 2))
-        r[..., 0] = f * x + k * y + out.K[:, 0, 2][:, None] - obs[..., 0]
-        r[..., 1] = fa * y + out.K[:, 1, 2][:, None] - obs[..., 1]
+        r[..., 0] = u + out.K[:, 0, 2][:, None] - obs[..., 0]
+        r[..., 1] = v + out.K[:, 1, 2][:, None] - obs[..., 1]
         r[~good] = 0.0
         # d(u, v) / d xc  (S, N, 2, 3)
         Jx = np.zeros((S, N, 2, 3))
         Jx[..., 0, 0] = f / z
         Jx[..., 0, 1] = k / z
-        Jx[..., 0, 2] = -(f * x + k * y) / z
+        Jx[..., 0, 2] = -u / z
         Jx[..., 1, 1] = fa / z
-        Jx[..., 1, 2] = -fa * y / z
+        Jx[..., 1, 2] = -v / z
         # d xc / d omega = -[xc]x, so Jx @ -[xc]x = cross(xc, rows of Jx); d xc / d C = -R.
         J = np.empty((S, N, 2, 6))
         J[..., :3] = _cross(xc[:, :, None, :], Jx)
