@@ -258,11 +258,13 @@ class FrameTracker:
             fd.free[fd.offsets[s] + det[valid[:, s], s]] = False
         return rig, det, uv_c, err
 
-    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None, uv=None):
+    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None, uv=None, found=None):
         """Candidates of ``slots`` (N, S) bool: pair arrays (point, sensor, local det, distance), nearest first.
 
         ``taken`` (G,) bool marks detections already attached this frame; ``nudge`` (N, S, 2) moves the
         projections of ``Xpred`` (:mod:`.vote`); ``uv``: those projections, when already known.
+        ``found``: a dict shared by searches of one frame with the same ``radius``, ``slots``, ``taken``
+        and ``k``; each leaves its queries there, and a later one searches again only those it moved.
         """
         if uv is None:
             uv = rig.project(Xpred)
@@ -272,7 +274,13 @@ class FrameTracker:
         e = np.zeros(0, int)
         if len(rows) == 0:
             return e, e, e, np.zeros(0), uv
-        idx, dist = candidates(fd.tree(), fd.free & ~taken, fd.shift(uv[rows, sens], sens), radius[rows], k=k)
+        q = fd.shift(uv[rows, sens], sens)
+        known = None
+        if found and np.array_equal(found["slots"], rows * self.S + sens):
+            known = found["queries"]
+        idx, dist = candidates(fd.tree(), fd.free & ~taken, q, radius[rows], k=k, known=known)
+        if found is not None:
+            found["slots"], found["queries"] = rows * self.S + sens, (q, idx, dist)
         has = idx >= 0
         if np.any(has):
             # Blob Size Difference Threshold: a blob whose width or height changed too much is not the marker.
@@ -319,7 +327,8 @@ class FrameTracker:
         # that camera) waits for pass 2, so that it cannot take, by a nearer prediction, the blob of a
         # neighbour the camera kept seeing (a jaw dot turning out of view projects onto the next one).
         slots = have[:, None] & np.all(np.isfinite(self.uv_prev), axis=2)
-        Pi, Si, Di, Dd, uv1 = self._search(fd, rig, Xp, radius, slots, taken, k=2)
+        found = {}
+        Pi, Si, Di, Dd, uv1 = self._search(fd, rig, Xp, radius, slots, taken, k=2, found=found)
         fj, d1, second = self._first_two(Pi, Si, Dd)
         # A region that changed speed at once (a jaw jerk) moves its predictions together first:
         # the views whose nearest blob is off their prediction, with another in reach, go to the vote.
@@ -328,7 +337,8 @@ class FrameTracker:
         if np.any(ask):
             nudge = vote.nudges(uv1, slots, ask, fd, float(p.face_point_tracking_distance), self.nb, self.w)
             if np.any(nudge):
-                Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2, nudge=nudge, uv=uv1)
+                Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2, nudge=nudge, uv=uv1,
+                                                   found=found)
                 fj, d1, second = self._first_two(Pi, Si, Dd)
         if len(Pi):
             key = Pi * S + Si
