@@ -8,7 +8,8 @@ from scipy.spatial import cKDTree
 K_CANDIDATES = 3
 
 
-def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius: np.ndarray, k: int = K_CANDIDATES):
+def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius: np.ndarray, k: int = K_CANDIDATES,
+               known: tuple | None = None):
     """Nearest free detections of predicted positions.
 
     Parameters
@@ -21,6 +22,9 @@ def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius:
         Predicted corrected positions (NaN: no search).
     radius : ndarray (N,)
         Search radius of each point.
+    known : tuple (pred, idx, dist), optional
+        An earlier call's ``pred`` and results with the same ``tree``, ``free``, ``radius`` and ``k``:
+        rows whose prediction is unchanged take their results from it instead of a new search.
 
     Returns
     -------
@@ -35,18 +39,29 @@ def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius:
     ok = np.all(np.isfinite(pred), axis=1) & (radius > 0)
     if tree is None or tree.n == 0 or not np.any(ok):
         return idx, dist
+    bound = float(np.max(radius[ok]))
+    if known is not None:
+        same = ok & np.all(pred == known[0], axis=1)
+        idx[same], dist[same] = known[1][same], known[2][same]
+        ok &= ~same
+        if not np.any(ok):
+            return idx, dist
     kk = min(tree.n, k + 2)   # a few spares: some neighbours are taken
-    d, i = tree.query(pred[ok], k=kk, distance_upper_bound=float(np.max(radius[ok])))
+    d, i = tree.query(pred[ok], k=kk, distance_upper_bound=bound)
     d = d.reshape(len(d), kk)
     i = i.reshape(len(i), kk)
     hit = np.isfinite(d) & (d <= radius[ok][:, None])
     hit[hit] &= free[i[hit]]
-    # Keep the first k hits of each row in order.
-    order = np.argsort(~hit, axis=1, kind="stable")[:, :k]
-    rows = np.arange(len(d))[:, None]
-    h = hit[rows, order]
-    sub_i = np.where(h, i[rows, order], -1)
-    sub_d = np.where(h, d[rows, order], np.inf)
+    if (hit[:, :-1] >= hit[:, 1:]).all():
+        # Usually no taken detection comes before a free one: the hits lead every row already.
+        h, sub_i, sub_d = hit[:, :k], i[:, :k], d[:, :k]
+    else:
+        # Keep the first k hits of each row in order.
+        order = np.argsort(~hit, axis=1, kind="stable")[:, :k]
+        rows = np.arange(len(d))[:, None]
+        h, sub_i, sub_d = hit[rows, order], i[rows, order], d[rows, order]
+    sub_i = np.where(h, sub_i, -1)
+    sub_d = np.where(h, sub_d, np.inf)
     if sub_i.shape[1] < k:
         pad = k - sub_i.shape[1]
         sub_i = np.pad(sub_i, ((0, 0), (0, pad)), constant_values=-1)

@@ -258,20 +258,29 @@ class FrameTracker:
             fd.free[fd.offsets[s] + det[valid[:, s], s]] = False
         return rig, det, uv_c, err
 
-    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None):
+    def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None, uv=None, found=None):
         """Candidates of ``slots`` (N, S) bool: pair arrays (point, sensor, local det, distance), nearest first.
 
         ``taken`` (G,) bool marks detections already attached this frame; ``nudge`` (N, S, 2) moves the
-        projections of ``Xpred`` (:mod:`.vote`).
+        projections of ``Xpred`` (:mod:`.vote`); ``uv``: those projections, when already known.
+        ``found``: a dict shared by searches of one frame with the same ``radius``, ``slots``, ``taken``
+        and ``k``; each leaves its queries there, and a later one searches again only those it moved.
         """
-        uv = rig.project(Xpred)
+        if uv is None:
+            uv = rig.project(Xpred)
         if nudge is not None:
             uv = uv + nudge
         rows, sens = np.nonzero(slots & np.all(np.isfinite(uv), axis=2))
         e = np.zeros(0, int)
         if len(rows) == 0:
             return e, e, e, np.zeros(0), uv
-        idx, dist = candidates(fd.tree(), fd.free & ~taken, fd.shift(uv[rows, sens], sens), radius[rows], k=k)
+        q = fd.shift(uv[rows, sens], sens)
+        known = None
+        if found and np.array_equal(found["slots"], rows * self.S + sens):
+            known = found["queries"]
+        idx, dist = candidates(fd.tree(), fd.free & ~taken, q, radius[rows], k=k, known=known)
+        if found is not None:
+            found["slots"], found["queries"] = rows * self.S + sens, (q, idx, dist)
         has = idx >= 0
         if np.any(has):
             # Blob Size Difference Threshold: a blob whose width or height changed too much is not the marker.
@@ -318,7 +327,8 @@ class FrameTracker:
         # that camera) waits for pass 2, so that it cannot take, by a nearer prediction, the blob of a
         # neighbour the camera kept seeing (a jaw dot turning out of view projects onto the next one).
         slots = have[:, None] & np.all(np.isfinite(self.uv_prev), axis=2)
-        Pi, Si, Di, Dd, uv1 = self._search(fd, rig, Xp, radius, slots, taken, k=2)
+        found = {}
+        Pi, Si, Di, Dd, uv1 = self._search(fd, rig, Xp, radius, slots, taken, k=2, found=found)
         fj, d1, second = self._first_two(Pi, Si, Dd)
         # A region that changed speed at once (a jaw jerk) moves its predictions together first:
         # the views whose nearest blob is off their prediction, with another in reach, go to the vote.
@@ -327,7 +337,8 @@ class FrameTracker:
         if np.any(ask):
             nudge = vote.nudges(uv1, slots, ask, fd, float(p.face_point_tracking_distance), self.nb, self.w)
             if np.any(nudge):
-                Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2, nudge=nudge)
+                Pi, Si, Di, Dd, _ = self._search(fd, rig, Xp, radius, slots, taken, k=2, nudge=nudge, uv=uv1,
+                                                   found=found)
                 fj, d1, second = self._first_two(Pi, Si, Dd)
         if len(Pi):
             key = Pi * S + Si
@@ -424,12 +435,10 @@ class FrameTracker:
             vall = np.concatenate([bdet >= 0, valid[multi]])
             rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
             X = triangulate(rig, uv_c, valid, confidence(src))
-            err = reprojection(rig, X, uv_c, valid)
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
         X, pred, clamped = self._steady_depth(rig, X, valid, measured)
         X = self._patch_depth(rig, X, uv_c, src, measured, motion)
-        err = reprojection(rig, X, uv_c, valid)
         if p.remove_bad_3d_points and np.any(measured):
             # Three or more agreeing blob views outweigh a prediction: a jaw speeding up from 3.6 to 9 mm a
             # frame put four views of a lower-lip dot 0.02 mm from the truth and 5.1 mm from the prediction.
@@ -443,7 +452,7 @@ class FrameTracker:
             alone = lost & ~np.all(np.isfinite(pred), axis=1)
             pred[alone] = Xp[alone]
             reach = np.where(alone, np.minimum(self.unseen + 1, LAST_SEEN_FRAMES), 1)
-            X, err, measured = self._remove_bad_3d(rig, X, err, uv_c, valid, src, det, measured, back, pred, reach)
+            X, measured = self._remove_bad_3d(rig, X, uv_c, valid, src, det, measured, back, pred, reach)
             valid = src != SRC_NONE
         # 8. Single-sensor tracking of points seen by one sensor only.
         status = np.where(measured, ST_RECONSTRUCTED, ST_NONE).astype(np.uint8)
@@ -843,7 +852,7 @@ class FrameTracker:
         spread = 1.4826 * np.take_along_axis(dev, order, 1)[np.arange(len(rows)), half]
         return np.where(np.isfinite(spread) & (cw[:, -1] > 0), spread, 0.0)
 
-    def _remove_bad_3d(self, rig, X, err, uv_c, valid, src, det, measured, back, pred, reach=1):
+    def _remove_bad_3d(self, rig, X, uv_c, valid, src, det, measured, back, pred, reach=1):
         """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction.
 
         ``back`` rows (lost on the previous frame, now seen by 3+ agreeing cameras, or seen in 3+
@@ -867,20 +876,20 @@ class FrameTracker:
                     e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
                     d = np.linalg.norm(Xi - pred[i])
                     if d <= lim[i] and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:
-                        best, best_d = (s, Xi, e), d
+                        best, best_d = (s, Xi), d
             if best is not None:
-                s, Xi, e = best
+                s, Xi = best
                 valid[i, s] = False
                 src[i, s] = SRC_NONE
                 uv_c[i, s] = np.nan
-                X[i], err[i] = Xi, e
+                X[i] = Xi
             else:
                 valid[i] = False
                 src[i] = SRC_NONE
                 uv_c[i] = np.nan
                 X[i] = np.nan
                 measured[i] = False
-        return X, err, measured
+        return X, measured
 
     def _single_sensor(self, rig, X, measured, uv_c, valid, one):
         """Points on the ray of their one sample, at the depth nearest the neighbours' prediction."""

@@ -28,6 +28,14 @@ def rodrigues(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(ths) * K + (1 - np.cos(ths)) * (K @ K)
 
 
+def _dehomogenise(h: np.ndarray) -> np.ndarray:
+    """Pixels of homogeneous image points ``h`` (..., 3); NaN behind the camera."""
+    z = h[..., 2:3]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        uv = h[..., :2] / z
+    return np.where(z > 1e-6, uv, np.nan)
+
+
 class RigState:
     """Poses of the S cameras of one frame as arrays (R (S,3,3), C (S,3)) plus fixed intrinsics.
 
@@ -73,11 +81,12 @@ class RigState:
     def project(self, X: np.ndarray) -> np.ndarray:
         """Corrected pixels ``(N, S, 2)`` of world points ``X`` (N, 3); NaN behind a camera."""
         P = self.P()
-        h = (X @ P[:, :, :3].transpose(0, 2, 1) + P[:, None, :, 3]).transpose(1, 0, 2)
-        z = h[..., 2:3]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            uv = h[..., :2] / z
-        return np.where(z > 1e-6, uv, np.nan)
+        return _dehomogenise((X @ P[:, :, :3].transpose(0, 2, 1) + P[:, None, :, 3]).transpose(1, 0, 2))
+
+    def project_in(self, X: np.ndarray, s: int) -> np.ndarray:
+        """Corrected pixels ``(N, 2)`` of world points ``X`` (N, 3) in sensor ``s`` alone (as :meth:`project`)."""
+        P = self.P()[s]
+        return _dehomogenise(X @ P[:, :3].T + P[:, 3])
 
     def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
         """Raw pixels of sensor ``s`` to corrected pixels."""
@@ -91,36 +100,66 @@ class RigState:
 
 
 def _view_equations(P: np.ndarray, uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each view's share of the weighted DLT normal equations: ``(n, S, 3, 3)`` and ``(n, S, 3)``.
+    """Each view's share of the weighted DLT normal equations: ``(6, S, n)`` and ``(3, S, n)``.
 
-    The rows of view s are u P3 - P1 and v P3 - P2, scaled by ``w[:, s]``.
+    The rows of view s are u P3 - P1 and v P3 - P2, scaled by ``w[:, s]``.  The
+    matrices are symmetric, so only their upper triangle (m00 m01 m02 m11 m12 m22)
+    is formed.  Components lead and points run along the last axis (with the 2x4
+    blocks innermost, every array operation would loop over 3 or 4 elements at a time).
     """
-    A = uv[..., :, None] * P[None, :, 2:3, :] - P[None, :, :2, :]          # (n, S, 2, 4)
-    A = A * w[..., None, None]
-    # Two rows per view: outer products written out (matmul on 2x3 blocks costs more per element).
-    r0, r1 = A[..., 0, :3], A[..., 1, :3]
-    M = r0[..., :, None] * r0[..., None, :] + r1[..., :, None] * r1[..., None, :]
-    return M, -(r0 * A[..., 0, 3:4] + r1 * A[..., 1, 3:4])
+    Pt = P.transpose(1, 2, 0)[..., None]                                     # (3, 4, S, 1)
+    A = uv.transpose(2, 1, 0)[:, None] * Pt[2] - Pt[:2]                      # (2, 4, S, n)
+    A *= w.T
+    # Both rows' products, the upper triangle then the right-hand side, written in place.
+    prod = np.empty((2, 9) + A.shape[2:])
+    np.multiply(A[:, 0:1], A[:, 0:3], out=prod[:, 0:3])
+    np.multiply(A[:, 1:2], A[:, 1:3], out=prod[:, 3:5])
+    np.multiply(A[:, 2], A[:, 2], out=prod[:, 5])
+    np.multiply(A[:, :3], A[:, 3:4], out=prod[:, 6:])
+    total = prod[0] + prod[1]
+    return total[:6], -total[6:]
 
 
-def _solve3(M: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve batched symmetric 3x3 systems ``M x = b`` by the adjugate (LAPACK costs more for tiny systems)."""
-    m00, m01, m02 = M[..., 0, 0], M[..., 0, 1], M[..., 0, 2]
-    m11, m12, m22 = M[..., 1, 1], M[..., 1, 2], M[..., 2, 2]
-    c00 = m11 * m22 - m12 * m12
-    c01 = m02 * m12 - m01 * m22
-    c02 = m01 * m12 - m02 * m11
-    c11 = m00 * m22 - m02 * m02
-    c12 = m01 * m02 - m00 * m12
-    c22 = m00 * m11 - m01 * m01
-    det = m00 * c00 + m01 * c01 + m02 * c02
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    x = np.stack([c00 * b0 + c01 * b1 + c02 * b2,
-                  c01 * b0 + c11 * b1 + c12 * b2,
-                  c02 * b0 + c12 * b1 + c22 * b2], axis=-1)
+def _solve3(m: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve batched symmetric 3x3 systems ``M x = b`` by the adjugate (LAPACK costs more for tiny systems).
+
+    ``m`` (6, ...) is the upper triangle of ``M`` (as from :func:`_view_equations`), ``b`` (3, ...);
+    returns ``x`` (..., 3), NaN where ``M`` is singular.
+    """
+    m00, m01, m02, m11, m12, m22 = m
+    # In place where a temporary would only be added to (the same arithmetic, fewer allocations).
+    c00 = m11 * m22
+    c00 -= m12 * m12
+    c01 = m02 * m12
+    c01 -= m01 * m22
+    c02 = m01 * m12
+    c02 -= m02 * m11
+    c11 = m00 * m22
+    c11 -= m02 * m02
+    c12 = m01 * m02
+    c12 -= m00 * m12
+    c22 = m00 * m11
+    c22 -= m01 * m01
+    det = m00 * c00
+    det += m01 * c01
+    det += m02 * c02
+    b0, b1, b2 = b
+    x = np.empty(det.shape + (3,))
     with np.errstate(divide="ignore", invalid="ignore"):
-        x /= det[..., None]
-    return np.where(np.abs(det)[..., None] > 1e-300, x, np.nan)
+        for i, (p, q, r) in enumerate(((c00, c01, c02), (c01, c11, c12), (c02, c12, c22))):
+            xi = p * b0
+            xi += q * b1
+            xi += r * b2
+            np.divide(xi, det, out=x[..., i])
+    x[~(np.abs(det) > 1e-300)] = np.nan
+    return x
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` over the last axis (same arithmetic) without its axis bookkeeping, which costs more on small arrays."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -196,9 +235,10 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
         X = triangulate(rig, uv_c, valid, weight)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
     M, b = _view_equations(P, uv, w)
-    Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)             # (N, S, 3) without view s
+    Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)   # (S, N, 3) without view s
     S = valid.shape[1]
-    proj = np.stack([rig.project(Xs[:, s])[:, s] for s in range(S)], axis=1)
+    proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
+    Xs = Xs.transpose(1, 0, 2)
     err = np.where(valid, np.linalg.norm(proj - uv_c, axis=-1), -1.0)
     return np.nan_to_num(err, nan=-1.0), Xs
 
@@ -245,20 +285,21 @@ def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarr
         xc = (Xf[None] - out.C[:, None]) @ out.R.transpose(0, 2, 1)           # (S, N, 3)
         z = np.where(np.abs(xc[..., 2]) > 1e-6, xc[..., 2], 1e-6)
         x, y = xc[..., 0] / z, xc[..., 1] / z
+        u, v = f * x + k * y, fa * y
         r = np.empty((S, N, 2))
-        r[..., 0] = f * x + k * y + out.K[:, 0, 2][:, None] - obs[..., 0]
-        r[..., 1] = fa * y + out.K[:, 1, 2][:, None] - obs[..., 1]
+        r[..., 0] = u + out.K[:, 0, 2][:, None] - obs[..., 0]
+        r[..., 1] = v + out.K[:, 1, 2][:, None] - obs[..., 1]
         r[~good] = 0.0
         # d(u, v) / d xc  (S, N, 2, 3)
         Jx = np.zeros((S, N, 2, 3))
         Jx[..., 0, 0] = f / z
         Jx[..., 0, 1] = k / z
-        Jx[..., 0, 2] = -(f * x + k * y) / z
+        Jx[..., 0, 2] = -u / z
         Jx[..., 1, 1] = fa / z
-        Jx[..., 1, 2] = -fa * y / z
+        Jx[..., 1, 2] = -v / z
         # d xc / d omega = -[xc]x, so Jx @ -[xc]x = cross(xc, rows of Jx); d xc / d C = -R.
         J = np.empty((S, N, 2, 6))
-        J[..., :3] = np.cross(xc[:, :, None, :], Jx)
+        J[..., :3] = _cross(xc[:, :, None, :], Jx)
         J[..., 3:] = -(Jx @ out.R[:, None])
         nr = np.sqrt(r[..., 0] ** 2 + r[..., 1] ** 2)
         w = np.where(good, np.sqrt(np.minimum(1.0, huber / np.maximum(nr, 1e-12))), 0.0)
