@@ -509,12 +509,14 @@ class FrameTracker:
     # --------------------------------------------------------------- sub-steps
     def _first_two(self, Pi, Si, Dd):
         """Of :meth:`_search`'s rows (k=2): each slot's first row, its distance and the second's (inf none)."""
+        if len(Pi) == 0:
+            return np.zeros(0, int), np.zeros(0), np.zeros(0)
         key = Pi * self.S + Si
         # Rows come in (slot, nearest first) order: a slot's second candidate follows its first.
-        first = np.r_[True, key[1:] != key[:-1]] if len(key) else np.zeros(0, bool)
+        first = np.r_[True, key[1:] != key[:-1]]
         fj = np.flatnonzero(first)
         has2 = (fj + 1 < len(key)) & ~np.r_[first[1:], True][fj]
-        second = np.where(has2, Dd[np.minimum(fj + 1, max(len(key) - 1, 0))], np.inf) if len(fj) else np.zeros(0)
+        second = np.where(has2, Dd[np.minimum(fj + 1, len(key) - 1)], np.inf)
         return fj, Dd[fj], second
 
     def _predict(self, X, available, rows):

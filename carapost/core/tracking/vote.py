@@ -41,7 +41,7 @@ AGREE_PX = 5.0
 #: A candidate wins only with this much more support (in neighbours) than staying put (a farther one
 #: than the nearest too)...
 MARGIN = 0.5
-#: ...and at least this much support besides the point's own.
+#: ...and at least this much support (in neighbours).
 MIN_SUPPORT = 1.5
 
 
@@ -94,23 +94,18 @@ def nudges(uv: np.ndarray, slots: np.ndarray, ask: np.ndarray, fd, radius: float
     theirs = off[np.maximum(nbr, 0), s[:, None]]                          # (g, K, K_VOTE, 2)
     dx = mine[:, None, :, None, 0] - theirs[:, :, None, :, 0]
     dy = mine[:, None, :, None, 1] - theirs[:, :, None, :, 1]
-    d2 = np.fmin.reduce(dx * dx + dy * dy, axis=-1)                       # NaN only where no neighbour blob
-    agree = np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2))    # (g, K, 1 + K_VOTE)
-    support = np.einsum("gkc,gk->gc", agree, w)
-    support = np.where(np.isfinite(mine[..., 0]), support, -np.inf)
+    support = _support(np.fmin.reduce(dx * dx + dy * dy, axis=-1), w, mine)   # NaN: no neighbour blob
     # Round 2: each neighbour now votes for one displacement only, the one it believes in (its nearest
-    # blob, or its own round-1 choice if it was asked and its neighbours had a say).  Among the many blobs of a dense region some
-    # neighbour blob lies near almost any displacement; one vote each leaves chance nothing to add up.
+    # blob, or its own round-1 choice if it was asked and its neighbours had a say).  Among the many
+    # blobs of a dense region some neighbour blob lies near almost any displacement; one vote each
+    # leaves chance nothing to add up.
     belief = np.full((N, S, 2), np.nan)
     belief[rows, sens] = off[rows, sens, 0]
     first = np.argmax(support, axis=1)
     said = support[np.arange(len(n)), first] > 0                          # else no neighbour had a word
     belief[n[said], s[said]] = mine[np.flatnonzero(said), first[said]]
     theirs = belief[np.maximum(nbr, 0), s[:, None]]                       # (g, K, 2)
-    d2 = np.sum((mine[:, None, :, :] - theirs[:, :, None, :]) ** 2, axis=-1)   # (g, K, 1 + K_VOTE)
-    agree = np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2))
-    support = np.einsum("gkc,gk->gc", agree, w)
-    support = np.where(np.isfinite(mine[..., 0]), support, -np.inf)
+    support = _support(np.sum((mine[:, None, :, :] - theirs[:, :, None, :]) ** 2, axis=-1), w, mine)
     best = np.argmax(support, axis=1)
     top = support[np.arange(len(n)), best]
     # A blob must outvote staying put, and a farther one the nearest blob too (what pass 1 would take).
@@ -119,3 +114,11 @@ def nudges(uv: np.ndarray, slots: np.ndarray, ask: np.ndarray, fd, radius: float
     win = (best > 0) & (top >= rival + MARGIN) & (top >= MIN_SUPPORT)
     out[n[win], s[win]] = mine[win, best[win]]
     return out
+
+
+def _support(d2: np.ndarray, w: np.ndarray, mine: np.ndarray) -> np.ndarray:
+    """(g, C) support of each candidate in ``mine`` (g, C, 2) from the squared distances ``d2`` (g, K, C) to
+    the neighbours' displacements, weighted by ``w`` (g, K); -inf for a candidate that is not there."""
+    agree = np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2))
+    support = np.einsum("gkc,gk->gc", agree, w)
+    return np.where(np.isfinite(mine[..., 0]), support, -np.inf)
