@@ -316,6 +316,54 @@ def test_patch_tracking_alone_stops_after_a_few_frames(quiet):
     assert p.status[16] != ST_NONE                 # its blobs are back: tracked again
 
 
+class _DecodingImages:
+    """A take's images as :class:`~carapost.io.frames.TakeFrames` serves them: ``image`` and ``prefetch``.
+
+    Records each ``prefetch`` request and each frame whose image the tracker read before a request
+    had covered it (the frames it would wait for a decoder on).
+    """
+
+    def __init__(self, sc, direction):
+        self.sc, self.direction = sc, direction
+        self.asked: list[tuple[int, int, int]] = []
+        self.covered: set[int] = set()
+        self.waited: set[int] = set()
+
+    def image(self, s, f):
+        if f not in self.covered:
+            self.waited.add(f)
+        return render(self.sc, s, f)
+
+    def prefetch(self, frame, count=8, step=1):
+        self.asked.append((frame, count, step))
+        self.covered.update(frame + step * i for i in range(1, count + 1))
+
+
+@pytest.mark.parametrize("direction", [1, -1])
+def test_tracking_decodes_the_next_frames_ahead(quiet, direction):
+    """Track [Sequence] asks the take's images for the frames ahead while it tracks one (a .pico frame of
+    four cameras takes longer to decode than to track); what it tracks is the same as without."""
+    from carapost.core.tracking.api import PREFETCH_FRAMES
+
+    start = 0 if direction > 0 else 11
+    end = 11 - start
+    sc = fresh(quiet)
+    if direction < 0:
+        initialise(sc, start)
+    plain = copy.deepcopy(sc)
+    images = _DecodingImages(sc, direction)
+    track(sc.project, start, direction, end_frame=end, images=images).do(sc.project)
+    frames = list(range(start + direction, end + direction, direction))
+    assert images.asked == [(f, PREFETCH_FRAMES, direction) for f in frames]
+    # Only the first frame tracked (and the start frame, for the first patches) is read unannounced.
+    assert images.waited <= {start, start + direction}
+    track(plain.project, start, direction, end_frame=end, images=lambda s, f: render(plain, s, f)).do(plain.project)
+    for q in sc.project.points.values():
+        r = plain.project.points[q.id]
+        for field in ("pos", "status", "src", "uv", "det"):
+            assert np.array_equal(getattr(q, field), getattr(r, field), equal_nan=True), (q.id, field)
+
+
 def test_reacquire_picks_the_detections_whose_rays_meet():
     """A lost point's candidates: its marker in 4 cameras among strays and a neighbour seen by 2."""
     from carapost.core.tracking.geometry import RigState

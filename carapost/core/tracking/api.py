@@ -24,6 +24,8 @@ from .patch import PatchPool
 
 #: Threads for patch matching (the target machine has 2 cores).
 DEFAULT_WORKERS = 2
+#: Frames of every camera decoded ahead of the tracker, in the frame cache's worker threads.
+PREFETCH_FRAMES = 4
 
 
 def _image_source(images):
@@ -153,10 +155,15 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
     face_ids = np.array([q.id for q in face], np.int64)
     brim_ids = np.array([q.id for q in brim_pts.values()], np.int64)
     brim_idx = np.array(list(brim_pts), np.int64)
+    # A take's images are H.264 (.pico): decoding a frame of four cameras costs more than tracking it,
+    # and the decoder lets other threads run, so the next frames are decoded while this one is tracked.
+    ahead = getattr(images, "prefetch", None) if images is not None else None
     try:
         for f in frames:
             if progress is not None:
                 progress.check()
+            if ahead is not None:
+                ahead(f, PREFETCH_FRAMES, direction)
             results.append(tracker.step(f, recs_of(f)))
             if progress is not None:
                 if progress.publishing:
