@@ -4,18 +4,20 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .nearest import SortedSweep
+
 #: Candidates considered per point and sensor (the nearest ones within the radius).
 K_CANDIDATES = 3
 
 
-def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius: np.ndarray, k: int = K_CANDIDATES,
+def candidates(tree: cKDTree | SortedSweep | None, free: np.ndarray, pred: np.ndarray, radius: np.ndarray, k: int = K_CANDIDATES,
                known: tuple | None = None):
     """Nearest free detections of predicted positions.
 
     Parameters
     ----------
-    tree : cKDTree or None
-        Over one sensor's detections (corrected pixels); None when it has none.
+    tree : cKDTree or SortedSweep or None
+        Over the detections (corrected pixels); None when there are none.
     free : ndarray (D,) bool
         Detections still available.
     pred : ndarray (N, 2)

@@ -11,10 +11,10 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from . import elastic, patch, reacquire, vote
+from .nearest import SortedSweep
 from .assign import candidates, mutual_best, size_change
 from .geometry import RigState, depth_uncertainty, held_out_errors, refine_poses, reprojection, triangulate
 from .params import TrackingParams
@@ -127,8 +127,10 @@ class FrameResult:
 class FrameData:
     """One frame's detections in corrected pixels, indexed globally over sensors.
 
-    All sensors share one KD-tree: sensor ``s`` sits at x + ``s * SENSOR_GAP``
+    All sensors share one index: sensor ``s`` sits at x + ``s * SENSOR_GAP``
     so that one query serves every camera (4 queries cost 4 times the Python overhead).
+    The index is a :class:`.nearest.SortedSweep`, which answers as a ``cKDTree`` of the
+    same points would, bit for bit, at a fraction of its cost at this size.
     """
 
     SENSOR_GAP = 1.0e6
@@ -150,7 +152,7 @@ class FrameData:
         if self._tree is None and self.offsets[-1]:
             shifted = np.concatenate(self.xy)
             shifted[:, 0] += self.sensor * self.SENSOR_GAP
-            self._tree = cKDTree(shifted)
+            self._tree = SortedSweep(shifted)
         return self._tree
 
     def shift(self, uv: np.ndarray, sensors: np.ndarray) -> np.ndarray:
