@@ -224,17 +224,14 @@ def _command(project, name, face, brim_pts, brim, results, detect_cmd) -> Comman
         order = sorted(range(n), key=lambda k: results[k].frame)
         res = [results[k] for k in order]
         lo = res[0].frame
-        updates = []
-        for i, q in enumerate(face):
-            updates.append((q.id, lo, {
-                "pos": np.array([r.X[i] for r in res], np.float32),
-                "status": np.array([r.status[i] for r in res], np.uint8),
-                "residual": np.array([r.residual[i] for r in res], np.float16),
-                "src": np.array([r.src[i] for r in res], np.uint8),
-                "det": np.array([r.det[i] for r in res], np.int32),
-                "uv": np.array([r.uv[i] for r in res], np.float32),
-                "score": np.array([r.score[i] for r in res], np.float16),
-            }))
+        # Each field stacked once over the frames (frames, points, ...) and cut per point: 160 points x 7
+        # fields of per-frame Python lists cost ~1 ms a frame.  The casts are the same element by element.
+        fields = {"pos": ("X", np.float32), "status": ("status", np.uint8), "residual": ("residual", np.float16),
+                  "src": ("src", np.uint8), "det": ("det", np.int32), "uv": ("uv", np.float32),
+                  "score": ("score", np.float16)}
+        stacked = {k: np.array([getattr(r, a) for r in res], dt) for k, (a, dt) in fields.items()}
+        updates = [(q.id, lo, {k: np.ascontiguousarray(v[:, i]) for k, v in stacked.items()})
+                   for i, q in enumerate(face)]
         if brim_pts:
             rows = _brim_rows(res, np.array(list(brim_pts), np.int64), brim)
             for j, q in enumerate(brim_pts.values()):
