@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
+from .geometry_kernel import dlt_held_out, dlt_solve
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
@@ -99,62 +100,6 @@ class RigState:
         return self.C[s], d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def _view_equations(P: np.ndarray, uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each view's share of the weighted DLT normal equations: ``(6, S, n)`` and ``(3, S, n)``.
-
-    The rows of view s are u P3 - P1 and v P3 - P2, scaled by ``w[:, s]``.  The
-    matrices are symmetric, so only their upper triangle (m00 m01 m02 m11 m12 m22)
-    is formed.  Components lead and points run along the last axis (with the 2x4
-    blocks innermost, every array operation would loop over 3 or 4 elements at a time).
-    """
-    Pt = P.transpose(1, 2, 0)[..., None]                                     # (3, 4, S, 1)
-    A = uv.transpose(2, 1, 0)[:, None] * Pt[2] - Pt[:2]                      # (2, 4, S, n)
-    A *= w.T
-    # Both rows' products, the upper triangle then the right-hand side, written in place.
-    prod = np.empty((2, 9) + A.shape[2:])
-    np.multiply(A[:, 0:1], A[:, 0:3], out=prod[:, 0:3])
-    np.multiply(A[:, 1:2], A[:, 1:3], out=prod[:, 3:5])
-    np.multiply(A[:, 2], A[:, 2], out=prod[:, 5])
-    np.multiply(A[:, :3], A[:, 3:4], out=prod[:, 6:])
-    total = prod[0] + prod[1]
-    return total[:6], -total[6:]
-
-
-def _solve3(m: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve batched symmetric 3x3 systems ``M x = b`` by the adjugate (LAPACK costs more for tiny systems).
-
-    ``m`` (6, ...) is the upper triangle of ``M`` (as from :func:`_view_equations`), ``b`` (3, ...);
-    returns ``x`` (..., 3), NaN where ``M`` is singular.
-    """
-    m00, m01, m02, m11, m12, m22 = m
-    # In place where a temporary would only be added to (the same arithmetic, fewer allocations).
-    c00 = m11 * m22
-    c00 -= m12 * m12
-    c01 = m02 * m12
-    c01 -= m01 * m22
-    c02 = m01 * m12
-    c02 -= m02 * m11
-    c11 = m00 * m22
-    c11 -= m02 * m02
-    c12 = m01 * m02
-    c12 -= m00 * m12
-    c22 = m00 * m11
-    c22 -= m01 * m01
-    det = m00 * c00
-    det += m01 * c01
-    det += m02 * c02
-    b0, b1, b2 = b
-    x = np.empty(det.shape + (3,))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for i, (p, q, r) in enumerate(((c00, c01, c02), (c01, c11, c12), (c02, c12, c22))):
-            xi = p * b0
-            xi += q * b1
-            xi += r * b2
-            np.divide(xi, det, out=x[..., i])
-    x[~(np.abs(det) > 1e-300)] = np.nan
-    return x
-
-
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``np.cross`` over the last axis (same arithmetic) without its axis bookkeeping, which costs more on small arrays."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
@@ -200,8 +145,7 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.n
     conf = 1.0 if weight is None else weight[ok]
     w = v * conf
     for _ in range(2):
-        M, b = _view_equations(P, uv, w)
-        X = _solve3(M.sum(1), b.sum(1))
+        X = dlt_solve(P, uv, w)
         w = _depth_weights(P, X, v) * conf
     out[ok] = X
     return out
@@ -234,8 +178,7 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     if X is None:
         X = triangulate(rig, uv_c, valid, weight)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
-    M, b = _view_equations(P, uv, w)
-    Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)   # (S, N, 3) without view s
+    Xs = dlt_held_out(P, uv, w)                                   # (S, N, 3) without view s
     S = valid.shape[1]
     proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
     Xs = Xs.transpose(1, 0, 2)
