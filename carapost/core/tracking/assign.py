@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
+
+from ..blobs.measure_kernel import JIT_EXACT
 
 from .nearest import SortedSweep
 
@@ -103,26 +106,62 @@ def mutual_best(point: np.ndarray, det: np.ndarray, cost: np.ndarray, n_points: 
     ndarray (P,) bool
         Accepted pairs.
     """
-    acc = np.zeros(len(point), bool)
-    alive = np.ones(len(point), bool)
-    for _ in range(rounds):
-        if not np.any(alive):
-            break
-        c = np.where(alive, cost, np.inf)
-        bp = np.full(n_points, np.inf)
-        np.minimum.at(bp, point, c)
-        bd = np.full(n_dets, np.inf)
-        np.minimum.at(bd, det, c)
-        win = alive & (c == bp[point]) & (c == bd[det])
-        # Exact ties on one detection: keep the first.
-        _, first = np.unique(det[win], return_index=True)
-        w = np.flatnonzero(win)[first]
-        _, firstp = np.unique(point[w], return_index=True)
-        w = w[firstp]
-        acc[w] = True
-        taken_p = np.zeros(n_points, bool)
-        taken_p[point[w]] = True
-        taken_d = np.zeros(n_dets, bool)
-        taken_d[det[w]] = True
-        alive &= ~taken_p[point] & ~taken_d[det]
+    acc = np.zeros(len(point), np.bool_)
+    if len(point):
+        _mutual_best(np.asarray(point, np.int64), np.asarray(det, np.int64), np.asarray(cost, np.float64),
+                     int(n_points), int(n_dets), int(rounds), acc)
     return acc
+
+
+@njit(**JIT_EXACT)
+def _mutual_best(point, det, cost, n_points, n_dets, rounds, acc):
+    """:func:`mutual_best`'s rounds as loops, into ``acc``; the same choices as its array version had.
+
+    Per round: each point's and detection's cheapest alive cost (a NaN cost poisons its point and
+    detection, as ``np.minimum.at`` did); a pair cheapest for both wins; of one detection's winners the
+    first pair, of one point's the one with the lowest detection index (``np.unique`` sorted them so).
+    """
+    P = len(point)
+    alive = np.empty(P, np.bool_)
+    for i in range(P):
+        alive[i] = True
+    bp = np.empty(n_points)
+    bd = np.empty(n_dets)
+    first_d = np.empty(n_dets, np.int64)
+    pick_p = np.empty(n_points, np.int64)
+    taken_p = np.zeros(n_points, np.bool_)
+    taken_d = np.zeros(n_dets, np.bool_)
+    for _ in range(rounds):
+        live = False
+        for i in range(P):
+            if alive[i]:
+                live = True
+            bp[point[i]] = np.inf
+            bd[det[i]] = np.inf
+            first_d[det[i]] = -1
+            pick_p[point[i]] = -1
+        if not live:
+            break
+        for i in range(P):
+            if alive[i]:
+                c = cost[i]
+                if np.isnan(c) or c < bp[point[i]]:
+                    bp[point[i]] = c
+                if np.isnan(c) or c < bd[det[i]]:
+                    bd[det[i]] = c
+        for i in range(P):
+            if alive[i] and cost[i] == bp[point[i]] and cost[i] == bd[det[i]] and first_d[det[i]] < 0:
+                first_d[det[i]] = i
+        for i in range(P):
+            if first_d[det[i]] == i:
+                j = pick_p[point[i]]
+                if j < 0 or det[i] < det[j]:
+                    pick_p[point[i]] = i
+        for i in range(P):
+            if pick_p[point[i]] == i:
+                acc[i] = True
+                taken_p[point[i]] = True
+                taken_d[det[i]] = True
+        for i in range(P):
+            if taken_p[point[i]] or taken_d[det[i]]:
+                alive[i] = False
