@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
-from .geometry_kernel import dlt_held_out, dlt_solve
+from .geometry_kernel import dlt_held_out, dlt_solve, pose_residuals, pose_weighted_jacobian
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
@@ -98,13 +98,6 @@ class RigState:
         h = np.concatenate([uv_c, np.ones((len(uv_c), 1))], axis=1)
         d = np.einsum("nji,njk,nk->ni", self.R[s], self.Kinv[s], h)
         return self.C[s], d / np.linalg.norm(d, axis=1, keepdims=True)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` over the last axis (same arithmetic) without its axis bookkeeping, which costs more on small arrays."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -219,35 +212,19 @@ def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarr
         return out
     Xf = np.where(np.isfinite(X), X, 0.0)
     obs = np.where(good[..., None], uv_c.transpose(1, 0, 2), 0.0)             # (S, N, 2)
-    f = out.K[:, 0, 0][:, None]
-    k = out.K[:, 0, 1][:, None]
-    fa = out.K[:, 1, 1][:, None]
     S, N = good.shape
     eye6 = np.eye(6)
     for _ in range(iterations):
         xc = (Xf[None] - out.C[:, None]) @ out.R.transpose(0, 2, 1)           # (S, N, 3)
-        z = np.where(np.abs(xc[..., 2]) > 1e-6, xc[..., 2], 1e-6)
-        x, y = xc[..., 0] / z, xc[..., 1] / z
-        u, v = f * x + k * y, fa * y
+        # The element-wise steps are compiled loops (:mod:`.geometry_kernel`); the products stay numpy's.
         r = np.empty((S, N, 2))
-        r[..., 0] = u + out.K[:, 0, 2][:, None] - obs[..., 0]
-        r[..., 1] = v + out.K[:, 1, 2][:, None] - obs[..., 1]
-        r[~good] = 0.0
-        # d(u, v) / d xc  (S, N, 2, 3)
-        Jx = np.zeros((S, N, 2, 3))
-        Jx[..., 0, 0] = f / z
-        Jx[..., 0, 1] = k / z
-        Jx[..., 0, 2] = -u / z
-        Jx[..., 1, 1] = fa / z
-        Jx[..., 1, 2] = -v / z
-        # d xc / d omega = -[xc]x, so Jx @ -[xc]x = cross(xc, rows of Jx); d xc / d C = -R.
-        J = np.empty((S, N, 2, 6))
-        J[..., :3] = _cross(xc[:, :, None, :], Jx)
-        J[..., 3:] = -(Jx @ out.R[:, None])
-        nr = np.sqrt(r[..., 0] ** 2 + r[..., 1] ** 2)
-        w = np.where(good, np.sqrt(np.minimum(1.0, huber / np.maximum(nr, 1e-12))), 0.0)
-        Jw = (J * w[..., None, None]).reshape(S, 2 * N, 6)
-        rw = (r * w[..., None]).reshape(S, 2 * N, 1)
+        Jx = np.empty((S, N, 2, 3))
+        pose_residuals(xc, obs, good, out.K, r, Jx)
+        Jw = np.empty((S, N, 2, 6))
+        rw = np.empty((S, N, 2))
+        pose_weighted_jacobian(xc, Jx, Jx @ out.R[:, None], r, good, float(huber), Jw, rw)
+        Jw = Jw.reshape(S, 2 * N, 6)
+        rw = rw.reshape(S, 2 * N, 1)
         Jt = Jw.transpose(0, 2, 1)
         H = Jt @ Jw
         g = Jt @ rw

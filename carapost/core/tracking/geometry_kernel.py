@@ -126,3 +126,75 @@ def dlt_held_out(P, uv, w):
             for j in range(3):
                 out[s, i, j] = row[0, j]
     return out
+
+
+@njit(**JIT_EXACT)
+def pose_residuals(xc, obs, good, K, r, Jx):
+    """Gauss-Newton residuals ``r`` (S, N, 2) and image Jacobians ``Jx`` (S, N, 2, 3) of camera-frame points ``xc``.
+
+    For :func:`.geometry.refine_poses`: ``z`` floored at 1e-6 where ``|z| <= 1e-6``, ``u = f x + k y``,
+    ``v = fa y`` (K's skew ``k``), ``r = (u + cx) - obs`` (0 where not ``good``),
+    ``d(u, v) / d xc = [[f, k, -u], [0, fa, -v]] / z``, each as numpy's array expressions computed it.
+    """
+    S, N = good.shape
+    for s in range(S):
+        f = K[s, 0, 0]
+        k = K[s, 0, 1]
+        fa = K[s, 1, 1]
+        cx = K[s, 0, 2]
+        cy = K[s, 1, 2]
+        for i in range(N):
+            z = xc[s, i, 2]
+            if not abs(z) > 1e-6:
+                z = 1e-6
+            x = xc[s, i, 0] / z
+            y = xc[s, i, 1] / z
+            u = f * x + k * y
+            v = fa * y
+            if good[s, i]:
+                r[s, i, 0] = u + cx - obs[s, i, 0]
+                r[s, i, 1] = v + cy - obs[s, i, 1]
+            else:
+                r[s, i, 0] = 0.0
+                r[s, i, 1] = 0.0
+            Jx[s, i, 0, 0] = f / z
+            Jx[s, i, 0, 1] = k / z
+            Jx[s, i, 0, 2] = -u / z
+            Jx[s, i, 1, 0] = 0.0
+            Jx[s, i, 1, 1] = fa / z
+            Jx[s, i, 1, 2] = -v / z
+
+
+@njit(**JIT_EXACT)
+def pose_weighted_jacobian(xc, Jx, JxR, r, good, huber, Jw, rw):
+    """Huber-weighted pose Jacobian ``Jw`` (S, N, 2, 6) and residuals ``rw`` (S, N, 2).
+
+    Rotation columns ``cross(xc, row of Jx)`` (``d xc / d omega = -[xc]x``), position columns ``-JxR``
+    (``Jx @ R``, numpy's product), both rows times ``w = sqrt(min(1, huber / max(|r|, 1e-12)))``
+    (0 where not ``good``; NaN propagates through min and max as in numpy).
+    """
+    S, N = good.shape
+    for s in range(S):
+        for i in range(N):
+            r0 = r[s, i, 0]
+            r1 = r[s, i, 1]
+            w = 0.0
+            if good[s, i]:
+                nr = np.sqrt(r0 * r0 + r1 * r1)
+                m = nr if (nr > 1e-12 or np.isnan(nr)) else 1e-12
+                q = huber / m
+                w = np.sqrt(q if (q < 1.0 or np.isnan(q)) else 1.0)
+            a0 = xc[s, i, 0]
+            a1 = xc[s, i, 1]
+            a2 = xc[s, i, 2]
+            for row in range(2):
+                b0 = Jx[s, i, row, 0]
+                b1 = Jx[s, i, row, 1]
+                b2 = Jx[s, i, row, 2]
+                Jw[s, i, row, 0] = (a1 * b2 - a2 * b1) * w
+                Jw[s, i, row, 1] = (a2 * b0 - a0 * b2) * w
+                Jw[s, i, row, 2] = (a0 * b1 - a1 * b0) * w
+                for c in range(3):
+                    Jw[s, i, row, 3 + c] = -JxR[s, i, row, c] * w
+            rw[s, i, 0] = r0 * w
+            rw[s, i, 1] = r1 * w
