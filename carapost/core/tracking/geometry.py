@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
-from .geometry_kernel import dlt_held_out, dlt_solve, pose_residuals, pose_weighted_jacobian
+from .geometry_kernel import dlt_held_out, dlt_solve, pixels, pose_residuals, pose_weighted_jacobian
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
@@ -27,14 +27,6 @@ def rodrigues(w: np.ndarray) -> np.ndarray:
     K[..., 1, 0], K[..., 1, 2] = k[..., 2], -k[..., 0]
     K[..., 2, 0], K[..., 2, 1] = -k[..., 1], k[..., 0]
     return np.eye(3) + np.sin(ths) * K + (1 - np.cos(ths)) * (K @ K)
-
-
-def _dehomogenise(h: np.ndarray) -> np.ndarray:
-    """Pixels of homogeneous image points ``h`` (..., 3); NaN behind the camera."""
-    z = h[..., 2:3]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        uv = h[..., :2] / z
-    return np.where(z > 1e-6, uv, np.nan)
 
 
 class RigState:
@@ -82,12 +74,16 @@ class RigState:
     def project(self, X: np.ndarray) -> np.ndarray:
         """Corrected pixels ``(N, S, 2)`` of world points ``X`` (N, 3); NaN behind a camera."""
         P = self.P()
-        return _dehomogenise((X @ P[:, :, :3].transpose(0, 2, 1) + P[:, None, :, 3]).transpose(1, 0, 2))
+        out = np.empty((len(X), len(P), 2))
+        pixels(X @ P[:, :, :3].transpose(0, 2, 1), P, out)
+        return out
 
     def project_in(self, X: np.ndarray, s: int) -> np.ndarray:
         """Corrected pixels ``(N, 2)`` of world points ``X`` (N, 3) in sensor ``s`` alone (as :meth:`project`)."""
         P = self.P()[s]
-        return _dehomogenise(X @ P[:, :3].T + P[:, 3])
+        out = np.empty((len(X), 1, 2))
+        pixels((X @ P[:, :3].T)[None], P[None], out)
+        return out[:, 0]
 
     def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
         """Raw pixels of sensor ``s`` to corrected pixels."""

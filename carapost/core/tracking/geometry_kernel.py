@@ -198,3 +198,25 @@ def pose_weighted_jacobian(xc, Jx, JxR, r, good, huber, Jw, rw):
                     Jw[s, i, row, 3 + c] = -JxR[s, i, row, c] * w
             rw[s, i, 0] = r0 * w
             rw[s, i, 1] = r1 * w
+
+
+@njit(**JIT_EXACT)
+def pixels(m, P, out):
+    """Corrected pixels ``out`` (N, S, 2) of ``m`` (S, N, 3), the points' ``X @ P[s, :, :3].T``.
+
+    Adds each camera's translation column (``h = m + P[s, :, 3]``) and divides by ``h[2]``; NaN where
+    ``h[2] <= 1e-6`` (behind the camera) or NaN, as :meth:`.geometry.RigState.project` did with arrays.
+    """
+    S, N = m.shape[0], m.shape[1]
+    for s in range(S):
+        t0 = P[s, 0, 3]
+        t1 = P[s, 1, 3]
+        t2 = P[s, 2, 3]
+        for i in range(N):
+            z = m[s, i, 2] + t2
+            if z > 1e-6:
+                out[i, s, 0] = (m[s, i, 0] + t0) / z
+                out[i, s, 1] = (m[s, i, 1] + t1) / z
+            else:
+                out[i, s, 0] = np.nan
+                out[i, s, 1] = np.nan
