@@ -53,26 +53,28 @@ def candidates(tree: cKDTree | SortedSweep | None, free: np.ndarray, pred: np.nd
             return idx, dist
     kk = min(tree.n, k + 2)   # a few spares: some neighbours are taken
     d, i = tree.query(pred[ok], k=kk, distance_upper_bound=bound)
-    d = d.reshape(len(d), kk)
-    i = i.reshape(len(i), kk)
-    hit = np.isfinite(d) & (d <= radius[ok][:, None])
-    hit[hit] &= free[i[hit]]
-    if (hit[:, :-1] >= hit[:, 1:]).all():
-        # Usually no taken detection comes before a free one: the hits lead every row already.
-        h, sub_i, sub_d = hit[:, :k], i[:, :k], d[:, :k]
-    else:
-        # Keep the first k hits of each row in order.
-        order = np.argsort(~hit, axis=1, kind="stable")[:, :k]
-        rows = np.arange(len(d))[:, None]
-        h, sub_i, sub_d = hit[rows, order], i[rows, order], d[rows, order]
-    sub_i = np.where(h, sub_i, -1)
-    sub_d = np.where(h, sub_d, np.inf)
-    if sub_i.shape[1] < k:
-        pad = k - sub_i.shape[1]
-        sub_i = np.pad(sub_i, ((0, 0), (0, pad)), constant_values=-1)
-        sub_d = np.pad(sub_d, ((0, 0), (0, pad)), constant_values=np.inf)
-    idx[ok], dist[ok] = sub_i, sub_d
+    _first_free(d.reshape(len(d), kk), i.reshape(len(i), kk), radius, free, np.flatnonzero(ok), idx, dist)
     return idx, dist
+
+
+@njit(**JIT_EXACT)
+def _first_free(d, i, radius, free, rows, idx, dist):
+    """Into ``idx`` / ``dist`` rows ``rows``: the first hits of each query's neighbours (``d``, ``i``, nearest first).
+
+    A hit is within the row's own ``radius`` and ``free`` (the query's bound is the largest radius, and
+    taken detections are still in the index); the row keeps the first ``k`` hits in order, -1 / inf after.
+    """
+    k = idx.shape[1]
+    for q in range(len(rows)):
+        r = rows[q]
+        c = 0
+        for j in range(d.shape[1]):
+            if c == k:
+                break
+            if np.isfinite(d[q, j]) and d[q, j] <= radius[r] and free[i[q, j]]:
+                idx[r, c] = i[q, j]
+                dist[r, c] = d[q, j]
+                c += 1
 
 
 def size_change(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
