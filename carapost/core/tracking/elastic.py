@@ -57,15 +57,38 @@ def update_offsets(off: np.ndarray, nb: np.ndarray, X: np.ndarray, measured: np.
         neighbour, updated in place where an offset already known is refreshed;
         :func:`weights` turns it into the prediction's weights.
     """
-    Xn = X[np.maximum(nb, 0)]
-    both = measured[:, None] & (nb >= 0) & measured[np.maximum(nb, 0)]
-    new = X[:, None, :] - Xn
-    if motion is not None:
-        had = both & np.all(np.isfinite(off), axis=2)
-        change = np.sum((new - off) ** 2, axis=2)
-        motion[had, 0] += change[had]
-        motion[had, 1] += 1
-    off[both] = new[both]
+    _refresh(off, nb, X, np.asarray(measured, np.bool_),
+             np.zeros((0, 0, 2)) if motion is None else motion, motion is not None)
+
+
+@njit(**JIT_EXACT)
+def _refresh(off, nb, X, measured, motion, track_motion):
+    """:func:`update_offsets` as one loop: ``off[i, k] = X[i] - X[nb[i, k]]`` where both are measured.
+
+    With ``track_motion``, an offset already known first adds its squared change (summed over x, y, z
+    in order, as ``np.sum`` over the last axis) and one count to ``motion[i, k]``.
+    """
+    n, K = nb.shape
+    new = np.empty(3)
+    for i in range(n):
+        if not measured[i]:
+            continue
+        for k in range(K):
+            j = nb[i, k]
+            if j < 0 or not measured[j]:
+                continue
+            for c in range(3):
+                new[c] = X[i, c] - X[j, c]
+            if track_motion and np.isfinite(off[i, k, 0]) and np.isfinite(off[i, k, 1]) \
+                    and np.isfinite(off[i, k, 2]):
+                change = 0.0
+                for c in range(3):
+                    e = new[c] - off[i, k, c]
+                    change += e * e
+                motion[i, k, 0] += change
+                motion[i, k, 1] += 1.0
+            for c in range(3):
+                off[i, k, c] = new[c]
 
 
 def weights(motion: np.ndarray) -> np.ndarray:
