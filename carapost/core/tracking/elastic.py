@@ -129,20 +129,86 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
         # Weighted median per coordinate where the weights differ (near the jaw, once it has moved):
         # the vote that minimises the weighted sum of distances to all votes (the mean of the
         # minimisers when two tie, as the plain median of an even count does).
-        u = use[ok]
-        wk = weight[ok]
-        uneven = np.where(u, wk, 0.0).max(1) > UNEVEN * np.where(u, wk, np.inf).min(1)
-        if np.any(uneven):
-            c = cand[ok]
-            uu = u[uneven][:, None, :]                                            # (m, 1, K)
-            v = np.where(uu, c[uneven].transpose(0, 2, 1), 0.0)                  # (m, 3, K)
-            w = np.where(uu, wk[uneven][:, None, :], 0.0)
-            cost = (np.abs(v[..., :, None] - v[..., None, :]) @ w[..., None])[..., 0]
-            cost = np.where(uu, cost, np.inf)
-            best = cost.min(axis=2, keepdims=True)
-            tie = cost <= best + 1e-9 * (1.0 + best)
-            pred[np.flatnonzero(ok)[uneven]] = (v * tie).sum(axis=2) / tie.sum(axis=2)
+        # The weighted sums are numpy's matrix product (BLAS fuses its multiply-adds); the element-wise
+        # steps around it are compiled loops.
+        rows = _uneven(use, weight, count, min_neighbours, UNEVEN)
+        if len(rows):
+            v, w, spread = _spreads(cand, use, weight, rows)
+            _weighted_median(spread @ w[..., None], v, use, rows, pred)
     return pred, count
+
+
+@njit(**JIT_EXACT)
+def _uneven(use, weight, count, min_neighbours, ratio):
+    """Rows with ``min_neighbours`` votes whose largest used weight exceeds ``ratio`` times the smallest."""
+    n, K = use.shape
+    out = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        if count[i] < min_neighbours:
+            continue
+        hi = 0.0 if not use[i, 0] else weight[i, 0]
+        lo = np.inf if not use[i, 0] else weight[i, 0]
+        for k in range(1, K):
+            a = weight[i, k] if use[i, k] else 0.0
+            b = weight[i, k] if use[i, k] else np.inf
+            # NaN wins, as in np.max / np.min.
+            if not np.isnan(hi) and (np.isnan(a) or a > hi):
+                hi = a
+            if not np.isnan(lo) and (np.isnan(b) or b < lo):
+                lo = b
+        if hi > ratio * lo:
+            out[m] = i
+            m += 1
+    return out[:m]
+
+
+@njit(**JIT_EXACT)
+def _spreads(cand, use, weight, rows):
+    """For ``rows``: votes ``v`` (m, 3, K) and weights ``w`` (m, 1, K) (0 unused) and ``|v_a - v_b|`` (m, 3, K, K)."""
+    K = use.shape[1]
+    m = len(rows)
+    v = np.empty((m, 3, K))
+    w = np.empty((m, 1, K))
+    spread = np.empty((m, 3, K, K))
+    for q in range(m):
+        i = rows[q]
+        for k in range(K):
+            w[q, 0, k] = weight[i, k] if use[i, k] else 0.0
+            for c in range(3):
+                v[q, c, k] = cand[i, k, c] if use[i, k] else 0.0
+        for c in range(3):
+            for a in range(K):
+                for b in range(K):
+                    spread[q, c, a, b] = abs(v[q, c, a] - v[q, c, b])
+    return v, w, spread
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _weighted_median(cost, v, use, rows, pred):
+    """Into ``pred[rows]``: per coordinate the mean of the votes whose weighted cost ``cost`` (m, 3, K, 1) is least.
+
+    Ties are within ``1e-9 (1 + best)``; unused votes cost inf; NaN costs propagate through the minimum.
+    ``error_model="numpy"``: a row without a least vote divides by zero as numpy did (JIT_EXACT otherwise).
+    """
+    K = use.shape[1]
+    for q in range(len(rows)):
+        i = rows[q]
+        for c in range(3):
+            best = cost[q, c, 0, 0] if use[i, 0] else np.inf
+            for a in range(1, K):
+                x = cost[q, c, a, 0] if use[i, a] else np.inf
+                if not np.isnan(best) and (np.isnan(x) or x < best):
+                    best = x
+            lim = best + 1e-9 * (1.0 + best)
+            acc = 0.0
+            n = 0
+            for a in range(K):
+                x = cost[q, c, a, 0] if use[i, a] else np.inf
+                t = x <= lim
+                acc += v[q, c, a] * (1.0 if t else 0.0)
+                n += t
+            pred[i, c] = acc / n
 
 
 @njit(**JIT_EXACT)
