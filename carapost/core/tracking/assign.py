@@ -77,15 +77,62 @@ def _first_free(d, i, radius, free, rows, idx, dist):
                 c += 1
 
 
-def size_change(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
-    """Relative change of blob width and height, ``max(|a-b| / max(a, b))`` over (major, minor).
+def size_changed(prev: np.ndarray, sizes: np.ndarray, idx: np.ndarray, threshold: float) -> np.ndarray:
+    """Candidates whose blob width or height changed too much (Blob Size Difference Threshold).
 
-    ``prev`` (..., 2) NaN when unknown gives 0 (no evidence against the match).
+    The relative change is ``max(|a - b| / max(a, b, 1e-6))`` over (major, minor), ``a`` the
+    candidate's size, ``b`` the point's previous one; a NaN (size unknown) counts 0, no evidence
+    against the match.
+
+    Parameters
+    ----------
+    prev : ndarray (n, 2)
+        Each query's previous blob size (NaN unknown).
+    sizes : ndarray (D, 2)
+        Every detection's (major, minor).
+    idx : ndarray (n, k) int
+        Candidates (-1 none), as from :func:`candidates`.
+    threshold : float
+
+    Returns
+    -------
+    ndarray (n, k) bool
+        Candidates (``idx >= 0``) whose change exceeds ``threshold``.
     """
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rel = np.abs(cur - prev) / np.maximum(np.maximum(cur, prev), 1e-6)
-    rel = np.nan_to_num(rel, nan=0.0)
-    return rel.max(axis=-1)
+    out = np.empty(idx.shape, np.bool_)
+    _size_changed(np.asarray(prev, np.float64), np.asarray(sizes, np.float64), idx, float(threshold), out)
+    return out
+
+
+@njit(**JIT_EXACT)
+def _nan_max(a, b):
+    """``np.maximum(a, b)``: NaN if either is."""
+    if np.isnan(a) or np.isnan(b):
+        return np.nan
+    return a if a >= b else b
+
+
+@njit(**JIT_EXACT)
+def _size_changed(prev, sizes, idx, threshold, out):
+    """:func:`size_changed` as one loop (the array version's arithmetic and NaN and inf handling)."""
+    n, k = idx.shape
+    for r in range(n):
+        for j in range(k):
+            d = idx[r, j]
+            if d < 0:
+                out[r, j] = False
+                continue
+            rel = 0.0
+            for c in range(2):
+                a = sizes[d, c]
+                b = prev[r, c]
+                x = abs(a - b) / _nan_max(_nan_max(a, b), 1e-6)
+                if np.isnan(x):
+                    x = 0.0
+                elif np.isinf(x):
+                    x = 1.7976931348623157e308   # np.nan_to_num's stand-in for inf
+                rel = x if c == 0 or x > rel else rel
+            out[r, j] = rel > threshold
 
 
 def mutual_best(point: np.ndarray, det: np.ndarray, cost: np.ndarray, n_points: int, n_dets: int,

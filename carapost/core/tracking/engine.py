@@ -15,7 +15,7 @@ import numpy as np
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from . import elastic, patch, reacquire, vote
 from .nearest import SortedSweep
-from .assign import candidates, mutual_best, size_change
+from .assign import candidates, mutual_best, size_changed
 from .geometry import RigState, depth_uncertainty, held_out_errors, refine_poses, reprojection, triangulate
 from .params import TrackingParams
 
@@ -286,8 +286,7 @@ class FrameTracker:
         has = idx >= 0
         if np.any(has):
             # Blob Size Difference Threshold: a blob whose width or height changed too much is not the marker.
-            rel = size_change(self.size[rows, sens][:, None, :], fd.size_all[np.maximum(idx, 0)])
-            drop = has & (rel > self.p.blob_size_difference_threshold)
+            drop = size_changed(self.size[rows, sens], fd.size_all, idx, self.p.blob_size_difference_threshold)
             if np.any(drop):
                 dist = np.where(drop, np.inf, dist)
                 order = np.argsort(dist, axis=1, kind="stable")
