@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
-from .geometry_kernel import dlt_held_out, dlt_solve, pixels, pose_residuals, pose_weighted_jacobian
+from .geometry_kernel import dlt_held_out, dlt_solve, pixel_errors, pixels, pose_residuals, pose_weighted_jacobian
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
@@ -171,14 +171,16 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     S = valid.shape[1]
     proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
     Xs = Xs.transpose(1, 0, 2)
-    err = np.where(valid, np.linalg.norm(proj - uv_c, axis=-1), -1.0)
+    err = np.empty(valid.shape)
+    pixel_errors(proj, uv_c, valid, -1.0, err)
     return np.nan_to_num(err, nan=-1.0), Xs
 
 
 def reprojection(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Corrected-pixel errors ``(N, S)`` of points ``X`` against ``uv_c``; NaN where not valid."""
-    e = np.linalg.norm(rig.project(X) - uv_c, axis=-1)
-    return np.where(valid, e, np.nan)
+    out = np.empty(valid.shape)
+    pixel_errors(rig.project(X), uv_c, valid, np.nan, out)
+    return out
 
 
 def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray, iterations: int = 3,

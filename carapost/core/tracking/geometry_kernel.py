@@ -220,3 +220,21 @@ def pixels(m, P, out):
             else:
                 out[i, s, 0] = np.nan
                 out[i, s, 1] = np.nan
+
+
+@njit(**JIT_EXACT)
+def pixel_errors(proj, uv, valid, invalid, out):
+    """``out`` (N, S): ``|proj - uv|`` (px) where ``valid``, else ``invalid``.
+
+    The length as ``np.linalg.norm`` over the last axis computes it, ``sqrt(dx * dx + dy * dy)``
+    (NaN where either point is NaN).
+    """
+    N, S = valid.shape
+    for i in range(N):
+        for s in range(S):
+            if valid[i, s]:
+                dx = proj[i, s, 0] - uv[i, s, 0]
+                dy = proj[i, s, 1] - uv[i, s, 1]
+                out[i, s] = np.sqrt(dx * dx + dy * dy)
+            else:
+                out[i, s] = invalid
