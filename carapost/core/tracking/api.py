@@ -268,3 +268,23 @@ def track_backwards_sequence(project, frame: int, **kw) -> Command:
 def track_single_frame(project, frame: int, direction: int = +1, **kw) -> Command:
     """Track [Single Frame] (Ctrl+W): the points of ``frame`` into the next (+1) or previous (-1) frame."""
     return track(project, frame, direction, single_frame=True, **kw)
+
+
+def warm_up() -> float:
+    """Load (or compile into numba's disk cache) the tracker's compiled kernels; returns the seconds it took.
+
+    The first tracking in a process loads them, ~0.3 s on a 2-core machine (the first after installing
+    carapost, or after a kernel changed, compiles them: ~10-20 s).  This tracks a small synthetic take
+    (35 points, 15 frames, with the jaw jerking open, so that the vote and the weighted median run) and
+    every kernel meets the array types and layouts real tracking gives it (~1.5 s in all); call it where
+    that first wait must not fall on a timed step (the tracking benchmark does).
+    """
+    import time
+
+    from .synthetic_take import initialise, make_take
+
+    t = time.perf_counter()
+    scene = make_take(35, 16, seed=0, blinks=1, slips=0)
+    initialise(scene, 0)
+    track(scene.project, 0, +1)
+    return time.perf_counter() - t
