@@ -61,7 +61,7 @@ def nearest_neighbour_track(project, start, frames, radius=35.0):
 
 def run(quick: bool = False) -> list[dict]:
     warnings.simplefilter("ignore", RuntimeWarning)
-    # The compiled kernels load once per process (~0.3 s): not part of the per-frame speed.
+    # The compiled kernels load once per process (~0.6 s): not part of the per-frame speed.
     warm = warm_up()
     frames = 60 if quick else 300
     sc = make_take(160, frames, seed=3)

@@ -273,10 +273,10 @@ def track_single_frame(project, frame: int, direction: int = +1, **kw) -> Comman
 def warm_up() -> float:
     """Load (or compile into numba's disk cache) the tracker's compiled kernels; returns the seconds it took.
 
-    The first tracking in a process loads them, ~0.3 s on a 2-core machine (the first after installing
-    carapost, or after a kernel changed, compiles them: ~10-20 s).  This tracks a small synthetic take
+    The first tracking in a process loads them, ~0.6 s on a 2-core machine (the first after installing
+    carapost, or after a kernel changed, compiles them: ~11 s).  This tracks a small synthetic take
     (35 points, 15 frames, with the jaw jerking open, so that the vote and the weighted median run) and
-    every kernel meets the array types and layouts real tracking gives it (~1.5 s in all); call it where
+    every kernel meets the array types and layouts real tracking gives it (~1.1 s in all); call it where
     that first wait must not fall on a timed step (the tracking benchmark does).
     """
     import time
