@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 
 from carapost.core.points import SRC_DETECTION, ST_NONE, ST_RECONSTRUCTED
-from carapost.core.tracking import track
+from carapost.core.tracking import track, warm_up
 from carapost.core.tracking.evaluate import evaluate
 from carapost.core.tracking.geometry import RigState, reprojection, triangulate
 from carapost.core.tracking.synthetic_take import initialise, make_take
@@ -61,6 +61,8 @@ def nearest_neighbour_track(project, start, frames, radius=35.0):
 
 def run(quick: bool = False) -> list[dict]:
     warnings.simplefilter("ignore", RuntimeWarning)
+    # The compiled kernels load once per process (~0.6 s): not part of the per-frame speed.
+    warm = warm_up()
     frames = 60 if quick else 300
     sc = make_take(160, frames, seed=3)
     initialise(sc, 0)
@@ -75,7 +77,8 @@ def run(quick: bool = False) -> list[dict]:
     fps = (frames - 1) / dt
     res = [
         {"benchmark": "tracking speed, 160 points x 4 cameras", "value": round(fps, 1), "unit": "frames/s",
-         "target": f">= {TARGET_FPS:g}", "pass": fps >= TARGET_FPS, "baseline_nearest_neighbour": round((frames - 1) / dt_nn, 1)},
+         "target": f">= {TARGET_FPS:g}", "pass": fps >= TARGET_FPS, "baseline_nearest_neighbour": round((frames - 1) / dt_nn, 1),
+         "warm_up_s": round(warm, 2)},
         {"benchmark": "coverage (2+ camera marker-frames with a correct 3D point)", "value": round(q["coverage"], 5),
          "unit": "fraction", "target": ">= 0.995", "pass": q["coverage"] >= 0.995,
          "baseline_nearest_neighbour": round(qn["coverage"], 5)},

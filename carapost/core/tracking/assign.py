@@ -2,20 +2,25 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
+
+from ..blobs.measure_kernel import JIT_EXACT
+
+from .nearest import SortedSweep
 
 #: Candidates considered per point and sensor (the nearest ones within the radius).
 K_CANDIDATES = 3
 
 
-def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius: np.ndarray, k: int = K_CANDIDATES,
+def candidates(tree: cKDTree | SortedSweep | None, free: np.ndarray, pred: np.ndarray, radius: np.ndarray, k: int = K_CANDIDATES,
                known: tuple | None = None):
     """Nearest free detections of predicted positions.
 
     Parameters
     ----------
-    tree : cKDTree or None
-        Over one sensor's detections (corrected pixels); None when it has none.
+    tree : cKDTree or SortedSweep or None
+        Over the detections (corrected pixels); None when there are none.
     free : ndarray (D,) bool
         Detections still available.
     pred : ndarray (N, 2)
@@ -48,37 +53,86 @@ def candidates(tree: cKDTree | None, free: np.ndarray, pred: np.ndarray, radius:
             return idx, dist
     kk = min(tree.n, k + 2)   # a few spares: some neighbours are taken
     d, i = tree.query(pred[ok], k=kk, distance_upper_bound=bound)
-    d = d.reshape(len(d), kk)
-    i = i.reshape(len(i), kk)
-    hit = np.isfinite(d) & (d <= radius[ok][:, None])
-    hit[hit] &= free[i[hit]]
-    if (hit[:, :-1] >= hit[:, 1:]).all():
-        # Usually no taken detection comes before a free one: the hits lead every row already.
-        h, sub_i, sub_d = hit[:, :k], i[:, :k], d[:, :k]
-    else:
-        # Keep the first k hits of each row in order.
-        order = np.argsort(~hit, axis=1, kind="stable")[:, :k]
-        rows = np.arange(len(d))[:, None]
-        h, sub_i, sub_d = hit[rows, order], i[rows, order], d[rows, order]
-    sub_i = np.where(h, sub_i, -1)
-    sub_d = np.where(h, sub_d, np.inf)
-    if sub_i.shape[1] < k:
-        pad = k - sub_i.shape[1]
-        sub_i = np.pad(sub_i, ((0, 0), (0, pad)), constant_values=-1)
-        sub_d = np.pad(sub_d, ((0, 0), (0, pad)), constant_values=np.inf)
-    idx[ok], dist[ok] = sub_i, sub_d
+    _first_free(d.reshape(len(d), kk), i.reshape(len(i), kk), radius, free, np.flatnonzero(ok), idx, dist)
     return idx, dist
 
 
-def size_change(prev: np.ndarray, cur: np.ndarray) -> np.ndarray:
-    """Relative change of blob width and height, ``max(|a-b| / max(a, b))`` over (major, minor).
+@njit(**JIT_EXACT)
+def _first_free(d, i, radius, free, rows, idx, dist):
+    """Into ``idx`` / ``dist`` rows ``rows``: the first hits of each query's neighbours (``d``, ``i``, nearest first).
 
-    ``prev`` (..., 2) NaN when unknown gives 0 (no evidence against the match).
+    A hit is within the row's own ``radius`` and ``free`` (the query's bound is the largest radius, and
+    taken detections are still in the index); the row keeps the first ``k`` hits in order, -1 / inf after.
     """
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rel = np.abs(cur - prev) / np.maximum(np.maximum(cur, prev), 1e-6)
-    rel = np.nan_to_num(rel, nan=0.0)
-    return rel.max(axis=-1)
+    k = idx.shape[1]
+    for q in range(len(rows)):
+        r = rows[q]
+        c = 0
+        for j in range(d.shape[1]):
+            if c == k:
+                break
+            if np.isfinite(d[q, j]) and d[q, j] <= radius[r] and free[i[q, j]]:
+                idx[r, c] = i[q, j]
+                dist[r, c] = d[q, j]
+                c += 1
+
+
+def size_changed(prev: np.ndarray, sizes: np.ndarray, idx: np.ndarray, threshold: float) -> np.ndarray:
+    """Candidates whose blob width or height changed too much (Blob Size Difference Threshold).
+
+    The relative change is ``max(|a - b| / max(a, b, 1e-6))`` over (major, minor), ``a`` the
+    candidate's size, ``b`` the point's previous one; a NaN (size unknown) counts 0, no evidence
+    against the match.
+
+    Parameters
+    ----------
+    prev : ndarray (n, 2)
+        Each query's previous blob size (NaN unknown).
+    sizes : ndarray (D, 2)
+        Every detection's (major, minor).
+    idx : ndarray (n, k) int
+        Candidates (-1 none), as from :func:`candidates`.
+    threshold : float
+
+    Returns
+    -------
+    ndarray (n, k) bool
+        Candidates (``idx >= 0``) whose change exceeds ``threshold``.
+    """
+    out = np.empty(idx.shape, np.bool_)
+    _size_changed(np.asarray(prev, np.float64), np.asarray(sizes, np.float64), idx, float(threshold), out)
+    return out
+
+
+@njit(**JIT_EXACT)
+def _nan_max(a, b):
+    """``np.maximum(a, b)``: NaN if either is."""
+    if np.isnan(a) or np.isnan(b):
+        return np.nan
+    return a if a >= b else b
+
+
+@njit(**JIT_EXACT)
+def _size_changed(prev, sizes, idx, threshold, out):
+    """:func:`size_changed` as one loop (the array version's arithmetic and NaN and inf handling)."""
+    n, k = idx.shape
+    for r in range(n):
+        for j in range(k):
+            d = idx[r, j]
+            if d < 0:
+                out[r, j] = False
+                continue
+            rel = 0.0
+            for c in range(2):
+                a = sizes[d, c]
+                b = prev[r, c]
+                x = abs(a - b) / _nan_max(_nan_max(a, b), 1e-6)
+                if np.isnan(x):
+                    x = 0.0
+                elif np.isinf(x):
+                    x = 1.7976931348623157e308   # np.nan_to_num's stand-in for inf
+                rel = x if c == 0 or x > rel else rel
+            out[r, j] = rel > threshold
 
 
 def mutual_best(point: np.ndarray, det: np.ndarray, cost: np.ndarray, n_points: int, n_dets: int,
@@ -101,26 +155,62 @@ def mutual_best(point: np.ndarray, det: np.ndarray, cost: np.ndarray, n_points: 
     ndarray (P,) bool
         Accepted pairs.
     """
-    acc = np.zeros(len(point), bool)
-    alive = np.ones(len(point), bool)
-    for _ in range(rounds):
-        if not np.any(alive):
-            break
-        c = np.where(alive, cost, np.inf)
-        bp = np.full(n_points, np.inf)
-        np.minimum.at(bp, point, c)
-        bd = np.full(n_dets, np.inf)
-        np.minimum.at(bd, det, c)
-        win = alive & (c == bp[point]) & (c == bd[det])
-        # Exact ties on one detection: keep the first.
-        _, first = np.unique(det[win], return_index=True)
-        w = np.flatnonzero(win)[first]
-        _, firstp = np.unique(point[w], return_index=True)
-        w = w[firstp]
-        acc[w] = True
-        taken_p = np.zeros(n_points, bool)
-        taken_p[point[w]] = True
-        taken_d = np.zeros(n_dets, bool)
-        taken_d[det[w]] = True
-        alive &= ~taken_p[point] & ~taken_d[det]
+    acc = np.zeros(len(point), np.bool_)
+    if len(point):
+        _mutual_best(np.asarray(point, np.int64), np.asarray(det, np.int64), np.asarray(cost, np.float64),
+                     int(n_points), int(n_dets), int(rounds), acc)
     return acc
+
+
+@njit(**JIT_EXACT)
+def _mutual_best(point, det, cost, n_points, n_dets, rounds, acc):
+    """:func:`mutual_best`'s rounds as loops, into ``acc``; the same choices as its array version had.
+
+    Per round: each point's and detection's cheapest alive cost (a NaN cost poisons its point and
+    detection, as ``np.minimum.at`` did); a pair cheapest for both wins; of one detection's winners the
+    first pair, of one point's the one with the lowest detection index (``np.unique`` sorted them so).
+    """
+    P = len(point)
+    alive = np.empty(P, np.bool_)
+    for i in range(P):
+        alive[i] = True
+    bp = np.empty(n_points)
+    bd = np.empty(n_dets)
+    first_d = np.empty(n_dets, np.int64)
+    pick_p = np.empty(n_points, np.int64)
+    taken_p = np.zeros(n_points, np.bool_)
+    taken_d = np.zeros(n_dets, np.bool_)
+    for _ in range(rounds):
+        live = False
+        for i in range(P):
+            if alive[i]:
+                live = True
+            bp[point[i]] = np.inf
+            bd[det[i]] = np.inf
+            first_d[det[i]] = -1
+            pick_p[point[i]] = -1
+        if not live:
+            break
+        for i in range(P):
+            if alive[i]:
+                c = cost[i]
+                if np.isnan(c) or c < bp[point[i]]:
+                    bp[point[i]] = c
+                if np.isnan(c) or c < bd[det[i]]:
+                    bd[det[i]] = c
+        for i in range(P):
+            if alive[i] and cost[i] == bp[point[i]] and cost[i] == bd[det[i]] and first_d[det[i]] < 0:
+                first_d[det[i]] = i
+        for i in range(P):
+            if first_d[det[i]] == i:
+                j = pick_p[point[i]]
+                if j < 0 or det[i] < det[j]:
+                    pick_p[point[i]] = i
+        for i in range(P):
+            if pick_p[point[i]] == i:
+                acc[i] = True
+                taken_p[point[i]] = True
+                taken_d[det[i]] = True
+        for i in range(P):
+            if taken_p[point[i]] or taken_d[det[i]]:
+                alive[i] = False

@@ -18,7 +18,10 @@ the jaw has moved, the lower lip follows the chin, not the nose.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
+
+from ..blobs.measure_kernel import JIT_EXACT
 
 #: Neighbours per point.
 K_NEIGHBOURS = 6
@@ -54,15 +57,38 @@ def update_offsets(off: np.ndarray, nb: np.ndarray, X: np.ndarray, measured: np.
         neighbour, updated in place where an offset already known is refreshed;
         :func:`weights` turns it into the prediction's weights.
     """
-    Xn = X[np.maximum(nb, 0)]
-    both = measured[:, None] & (nb >= 0) & measured[np.maximum(nb, 0)]
-    new = X[:, None, :] - Xn
-    if motion is not None:
-        had = both & np.all(np.isfinite(off), axis=2)
-        change = np.sum((new - off) ** 2, axis=2)
-        motion[had, 0] += change[had]
-        motion[had, 1] += 1
-    off[both] = new[both]
+    _refresh(off, nb, X, np.asarray(measured, np.bool_),
+             np.zeros((0, 0, 2)) if motion is None else motion, motion is not None)
+
+
+@njit(**JIT_EXACT)
+def _refresh(off, nb, X, measured, motion, track_motion):
+    """:func:`update_offsets` as one loop: ``off[i, k] = X[i] - X[nb[i, k]]`` where both are measured.
+
+    With ``track_motion``, an offset already known first adds its squared change (summed over x, y, z
+    in order, as ``np.sum`` over the last axis) and one count to ``motion[i, k]``.
+    """
+    n, K = nb.shape
+    new = np.empty(3)
+    for i in range(n):
+        if not measured[i]:
+            continue
+        for k in range(K):
+            j = nb[i, k]
+            if j < 0 or not measured[j]:
+                continue
+            for c in range(3):
+                new[c] = X[i, c] - X[j, c]
+            if track_motion and np.isfinite(off[i, k, 0]) and np.isfinite(off[i, k, 1]) \
+                    and np.isfinite(off[i, k, 2]):
+                change = 0.0
+                for c in range(3):
+                    e = new[c] - off[i, k, c]
+                    change += e * e
+                motion[i, k, 0] += change
+                motion[i, k, 1] += 1.0
+            for c in range(3):
+                off[i, k, c] = new[c]
 
 
 def weights(motion: np.ndarray) -> np.ndarray:
@@ -95,35 +121,140 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
     count : ndarray (N,) int
         Neighbours used.
     """
-    safe = np.maximum(nb, 0)
-    use = (nb >= 0) & available[safe] & np.all(np.isfinite(off), axis=2)
-    cand = np.where(use[..., None], X[safe] + off, np.nan)
-    count = use.sum(axis=1)
-    pred = np.full((len(nb), 3), np.nan)
+    pred, use, cand, count = _votes_median(X, available, nb, off, min_neighbours)
     ok = count >= min_neighbours
     if not np.any(ok):
         return pred, count
-    c = cand[ok]
-    # Median via sort: NaNs sort last, so the middle of the first `count` entries.
-    srt = np.sort(c, axis=1)
-    n = count[ok]
-    r = np.arange(len(c))
-    med = 0.5 * (srt[r, (n - 1) // 2] + srt[r, n // 2])
     if weight is not None:
         # Weighted median per coordinate where the weights differ (near the jaw, once it has moved):
         # the vote that minimises the weighted sum of distances to all votes (the mean of the
         # minimisers when two tie, as the plain median of an even count does).
-        u = use[ok]
-        wk = weight[ok]
-        uneven = np.where(u, wk, 0.0).max(1) > UNEVEN * np.where(u, wk, np.inf).min(1)
-        if np.any(uneven):
-            uu = u[uneven][:, None, :]                                            # (m, 1, K)
-            v = np.where(uu, c[uneven].transpose(0, 2, 1), 0.0)                  # (m, 3, K)
-            w = np.where(uu, wk[uneven][:, None, :], 0.0)
-            cost = (np.abs(v[..., :, None] - v[..., None, :]) @ w[..., None])[..., 0]
-            cost = np.where(uu, cost, np.inf)
-            best = cost.min(axis=2, keepdims=True)
-            tie = cost <= best + 1e-9 * (1.0 + best)
-            med[uneven] = (v * tie).sum(axis=2) / tie.sum(axis=2)
-    pred[ok] = med
+        # The weighted sums are numpy's matrix product (BLAS fuses its multiply-adds); the element-wise
+        # steps around it are compiled loops.
+        rows = _uneven(use, weight, count, min_neighbours, UNEVEN)
+        if len(rows):
+            v, w, spread = _spreads(cand, use, weight, rows)
+            _weighted_median(spread @ w[..., None], v, use, rows, pred)
     return pred, count
+
+
+@njit(**JIT_EXACT)
+def _uneven(use, weight, count, min_neighbours, ratio):
+    """Rows with ``min_neighbours`` votes whose largest used weight exceeds ``ratio`` times the smallest."""
+    n, K = use.shape
+    out = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        if count[i] < min_neighbours:
+            continue
+        hi = 0.0 if not use[i, 0] else weight[i, 0]
+        lo = np.inf if not use[i, 0] else weight[i, 0]
+        for k in range(1, K):
+            a = weight[i, k] if use[i, k] else 0.0
+            b = weight[i, k] if use[i, k] else np.inf
+            # NaN wins, as in np.max / np.min.
+            if not np.isnan(hi) and (np.isnan(a) or a > hi):
+                hi = a
+            if not np.isnan(lo) and (np.isnan(b) or b < lo):
+                lo = b
+        if hi > ratio * lo:
+            out[m] = i
+            m += 1
+    return out[:m]
+
+
+@njit(**JIT_EXACT)
+def _spreads(cand, use, weight, rows):
+    """For ``rows``: votes ``v`` (m, 3, K) and weights ``w`` (m, 1, K) (0 unused) and ``|v_a - v_b|`` (m, 3, K, K)."""
+    K = use.shape[1]
+    m = len(rows)
+    v = np.empty((m, 3, K))
+    w = np.empty((m, 1, K))
+    spread = np.empty((m, 3, K, K))
+    for q in range(m):
+        i = rows[q]
+        for k in range(K):
+            w[q, 0, k] = weight[i, k] if use[i, k] else 0.0
+            for c in range(3):
+                v[q, c, k] = cand[i, k, c] if use[i, k] else 0.0
+        for c in range(3):
+            for a in range(K):
+                for b in range(K):
+                    spread[q, c, a, b] = abs(v[q, c, a] - v[q, c, b])
+    return v, w, spread
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _weighted_median(cost, v, use, rows, pred):
+    """Into ``pred[rows]``: per coordinate the mean of the votes whose weighted cost ``cost`` (m, 3, K, 1) is least.
+
+    Ties are within ``1e-9 (1 + best)``; unused votes cost inf; NaN costs propagate through the minimum.
+    ``error_model="numpy"``: a row without a least vote divides by zero as numpy did (JIT_EXACT otherwise).
+    """
+    K = use.shape[1]
+    for q in range(len(rows)):
+        i = rows[q]
+        for c in range(3):
+            best = cost[q, c, 0, 0] if use[i, 0] else np.inf
+            for a in range(1, K):
+                x = cost[q, c, a, 0] if use[i, a] else np.inf
+                if not np.isnan(best) and (np.isnan(x) or x < best):
+                    best = x
+            lim = best + 1e-9 * (1.0 + best)
+            acc = 0.0
+            n = 0
+            for a in range(K):
+                x = cost[q, c, a, 0] if use[i, a] else np.inf
+                t = x <= lim
+                acc += v[q, c, a] * (1.0 if t else 0.0)
+                n += t
+            pred[i, c] = acc / n
+
+
+@njit(**JIT_EXACT)
+def _votes_median(X, available, nb, off, min_neighbours):
+    """Each row's votes ``X[nb] + off`` and their plain median, as numpy's sort-based median computes it.
+
+    Returns the medians (n, 3; NaN where fewer than ``min_neighbours`` votes), the votes used (n, K),
+    the votes (n, K, 3; NaN unused) and their count (n,).  Per coordinate the votes are sorted with NaN
+    last (an available neighbour may lack a position) and the median is ``0.5 * (lo + hi)`` of the middle
+    two, as ``np.sort`` and the indexing did; one pass per row instead of a dozen array operations.
+    """
+    n, K = nb.shape
+    pred = np.empty((n, 3))
+    use = np.empty((n, K), np.bool_)
+    cand = np.empty((n, K, 3))
+    count = np.empty(n, np.int64)
+    col = np.empty(K)
+    for i in range(n):
+        c = 0
+        for d in range(3):
+            pred[i, d] = np.nan
+        for k in range(K):
+            use[i, k] = False
+            for d in range(3):
+                cand[i, k, d] = np.nan
+            j = nb[i, k]
+            if j >= 0 and available[j] and np.isfinite(off[i, k, 0]) and np.isfinite(off[i, k, 1]) \
+                    and np.isfinite(off[i, k, 2]):
+                use[i, k] = True
+                for d in range(3):
+                    cand[i, k, d] = X[j, d] + off[i, k, d]
+                c += 1
+        count[i] = c
+        if c < min_neighbours:
+            continue
+        for d in range(3):
+            # Insertion sort of the used votes, NaN last.
+            m = 0
+            for k in range(K):
+                if use[i, k]:
+                    v = cand[i, k, d]
+                    p = m
+                    while p > 0 and (col[p - 1] > v or (np.isnan(col[p - 1]) and not np.isnan(v))):
+                        col[p] = col[p - 1]
+                        p -= 1
+                    col[p] = v
+                    m += 1
+            pred[i, d] = 0.5 * (col[(c - 1) // 2] + col[c // 2])
+    return pred, use, cand, count

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
+from .geometry_kernel import dlt_held_out, dlt_solve, pixel_errors, pixels, pose_residuals, pose_weighted_jacobian
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
@@ -26,14 +27,6 @@ def rodrigues(w: np.ndarray) -> np.ndarray:
     K[..., 1, 0], K[..., 1, 2] = k[..., 2], -k[..., 0]
     K[..., 2, 0], K[..., 2, 1] = -k[..., 1], k[..., 0]
     return np.eye(3) + np.sin(ths) * K + (1 - np.cos(ths)) * (K @ K)
-
-
-def _dehomogenise(h: np.ndarray) -> np.ndarray:
-    """Pixels of homogeneous image points ``h`` (..., 3); NaN behind the camera."""
-    z = h[..., 2:3]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        uv = h[..., :2] / z
-    return np.where(z > 1e-6, uv, np.nan)
 
 
 class RigState:
@@ -81,12 +74,16 @@ class RigState:
     def project(self, X: np.ndarray) -> np.ndarray:
         """Corrected pixels ``(N, S, 2)`` of world points ``X`` (N, 3); NaN behind a camera."""
         P = self.P()
-        return _dehomogenise((X @ P[:, :, :3].transpose(0, 2, 1) + P[:, None, :, 3]).transpose(1, 0, 2))
+        out = np.empty((len(X), len(P), 2))
+        pixels(X @ P[:, :, :3].transpose(0, 2, 1), P, out)
+        return out
 
     def project_in(self, X: np.ndarray, s: int) -> np.ndarray:
         """Corrected pixels ``(N, 2)`` of world points ``X`` (N, 3) in sensor ``s`` alone (as :meth:`project`)."""
         P = self.P()[s]
-        return _dehomogenise(X @ P[:, :3].T + P[:, 3])
+        out = np.empty((len(X), 1, 2))
+        pixels((X @ P[:, :3].T)[None], P[None], out)
+        return out[:, 0]
 
     def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
         """Raw pixels of sensor ``s`` to corrected pixels."""
@@ -97,69 +94,6 @@ class RigState:
         h = np.concatenate([uv_c, np.ones((len(uv_c), 1))], axis=1)
         d = np.einsum("nji,njk,nk->ni", self.R[s], self.Kinv[s], h)
         return self.C[s], d / np.linalg.norm(d, axis=1, keepdims=True)
-
-
-def _view_equations(P: np.ndarray, uv: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each view's share of the weighted DLT normal equations: ``(6, S, n)`` and ``(3, S, n)``.
-
-    The rows of view s are u P3 - P1 and v P3 - P2, scaled by ``w[:, s]``.  The
-    matrices are symmetric, so only their upper triangle (m00 m01 m02 m11 m12 m22)
-    is formed.  Components lead and points run along the last axis (with the 2x4
-    blocks innermost, every array operation would loop over 3 or 4 elements at a time).
-    """
-    Pt = P.transpose(1, 2, 0)[..., None]                                     # (3, 4, S, 1)
-    A = uv.transpose(2, 1, 0)[:, None] * Pt[2] - Pt[:2]                      # (2, 4, S, n)
-    A *= w.T
-    # Both rows' products, the upper triangle then the right-hand side, written in place.
-    prod = np.empty((2, 9) + A.shape[2:])
-    np.multiply(A[:, 0:1], A[:, 0:3], out=prod[:, 0:3])
-    np.multiply(A[:, 1:2], A[:, 1:3], out=prod[:, 3:5])
-    np.multiply(A[:, 2], A[:, 2], out=prod[:, 5])
-    np.multiply(A[:, :3], A[:, 3:4], out=prod[:, 6:])
-    total = prod[0] + prod[1]
-    return total[:6], -total[6:]
-
-
-def _solve3(m: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve batched symmetric 3x3 systems ``M x = b`` by the adjugate (LAPACK costs more for tiny systems).
-
-    ``m`` (6, ...) is the upper triangle of ``M`` (as from :func:`_view_equations`), ``b`` (3, ...);
-    returns ``x`` (..., 3), NaN where ``M`` is singular.
-    """
-    m00, m01, m02, m11, m12, m22 = m
-    # In place where a temporary would only be added to (the same arithmetic, fewer allocations).
-    c00 = m11 * m22
-    c00 -= m12 * m12
-    c01 = m02 * m12
-    c01 -= m01 * m22
-    c02 = m01 * m12
-    c02 -= m02 * m11
-    c11 = m00 * m22
-    c11 -= m02 * m02
-    c12 = m01 * m02
-    c12 -= m00 * m12
-    c22 = m00 * m11
-    c22 -= m01 * m01
-    det = m00 * c00
-    det += m01 * c01
-    det += m02 * c02
-    b0, b1, b2 = b
-    x = np.empty(det.shape + (3,))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for i, (p, q, r) in enumerate(((c00, c01, c02), (c01, c11, c12), (c02, c12, c22))):
-            xi = p * b0
-            xi += q * b1
-            xi += r * b2
-            np.divide(xi, det, out=x[..., i])
-    x[~(np.abs(det) > 1e-300)] = np.nan
-    return x
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` over the last axis (same arithmetic) without its axis bookkeeping, which costs more on small arrays."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -200,8 +134,7 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.n
     conf = 1.0 if weight is None else weight[ok]
     w = v * conf
     for _ in range(2):
-        M, b = _view_equations(P, uv, w)
-        X = _solve3(M.sum(1), b.sum(1))
+        X = dlt_solve(P, uv, w)
         w = _depth_weights(P, X, v) * conf
     out[ok] = X
     return out
@@ -234,19 +167,20 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     if X is None:
         X = triangulate(rig, uv_c, valid, weight)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
-    M, b = _view_equations(P, uv, w)
-    Xs = _solve3(M.sum(1)[:, None] - M, b.sum(1)[:, None] - b)   # (S, N, 3) without view s
+    Xs = dlt_held_out(P, uv, w)                                   # (S, N, 3) without view s
     S = valid.shape[1]
     proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
     Xs = Xs.transpose(1, 0, 2)
-    err = np.where(valid, np.linalg.norm(proj - uv_c, axis=-1), -1.0)
+    err = np.empty(valid.shape)
+    pixel_errors(proj, uv_c, valid, -1.0, err)
     return np.nan_to_num(err, nan=-1.0), Xs
 
 
 def reprojection(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Corrected-pixel errors ``(N, S)`` of points ``X`` against ``uv_c``; NaN where not valid."""
-    e = np.linalg.norm(rig.project(X) - uv_c, axis=-1)
-    return np.where(valid, e, np.nan)
+    out = np.empty(valid.shape)
+    pixel_errors(rig.project(X), uv_c, valid, np.nan, out)
+    return out
 
 
 def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray, iterations: int = 3,
@@ -276,35 +210,19 @@ def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarr
         return out
     Xf = np.where(np.isfinite(X), X, 0.0)
     obs = np.where(good[..., None], uv_c.transpose(1, 0, 2), 0.0)             # (S, N, 2)
-    f = out.K[:, 0, 0][:, None]
-    k = out.K[:, 0, 1][:, None]
-    fa = out.K[:, 1, 1][:, None]
     S, N = good.shape
     eye6 = np.eye(6)
     for _ in range(iterations):
         xc = (Xf[None] - out.C[:, None]) @ out.R.transpose(0, 2, 1)           # (S, N, 3)
-        z = np.where(np.abs(xc[..., 2]) > 1e-6, xc[..., 2], 1e-6)
-        x, y = xc[..., 0] / z, xc[..., 1] / z
-        u, v = f * x + k * y, fa * y
+        # The element-wise steps are compiled loops (:mod:`.geometry_kernel`); the products stay numpy's.
         r = np.empty((S, N, 2))
-        r[..., 0] = u + out.K[:, 0, 2][:, None] - obs[..., 0]
-        r[..., 1] = v + out.K[:, 1, 2][:, None] - obs[..., 1]
-        r[~good] = 0.0
-        # d(u, v) / d xc  (S, N, 2, 3)
-        Jx = np.zeros((S, N, 2, 3))
-        Jx[..., 0, 0] = f / z
-        Jx[..., 0, 1] = k / z
-        Jx[..., 0, 2] = -u / z
-        Jx[..., 1, 1] = fa / z
-        Jx[..., 1, 2] = -v / z
-        # d xc / d omega = -[xc]x, so Jx @ -[xc]x = cross(xc, rows of Jx); d xc / d C = -R.
-        J = np.empty((S, N, 2, 6))
-        J[..., :3] = _cross(xc[:, :, None, :], Jx)
-        J[..., 3:] = -(Jx @ out.R[:, None])
-        nr = np.sqrt(r[..., 0] ** 2 + r[..., 1] ** 2)
-        w = np.where(good, np.sqrt(np.minimum(1.0, huber / np.maximum(nr, 1e-12))), 0.0)
-        Jw = (J * w[..., None, None]).reshape(S, 2 * N, 6)
-        rw = (r * w[..., None]).reshape(S, 2 * N, 1)
+        Jx = np.empty((S, N, 2, 3))
+        pose_residuals(xc, obs, good, out.K, r, Jx)
+        Jw = np.empty((S, N, 2, 6))
+        rw = np.empty((S, N, 2))
+        pose_weighted_jacobian(xc, Jx, Jx @ out.R[:, None], r, good, float(huber), Jw, rw)
+        Jw = Jw.reshape(S, 2 * N, 6)
+        rw = rw.reshape(S, 2 * N, 1)
         Jt = Jw.transpose(0, 2, 1)
         H = Jt @ Jw
         g = Jt @ rw
