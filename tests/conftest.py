@@ -12,11 +12,13 @@ from support import make_project  # noqa: E402
 
 
 def pytest_sessionstart(session):
-    """Compile the blob kernels once, first: in a fresh clone that takes ~25 s, which must not fall
-    inside a test's own time limit (a GUI test waits 20 s for Detect Blobs)."""
+    """Compile the blob and tracking kernels once, first: in a fresh clone that takes ~25 s and ~11 s,
+    which must not fall inside a test's own time limit (a GUI test waits 20 s for Detect Blobs)."""
     from carapost.core.blobs import warm_up
+    from carapost.core.tracking import warm_up as warm_up_tracking
 
     warm_up()
+    warm_up_tracking()
 
 
 @pytest.fixture
