@@ -266,3 +266,28 @@ def test_the_compiled_profile_radius_is_numpys_to_the_bit(frames):
         out = np.empty(len(F))
         ck.profile_radius(F, level, out)
         assert out.tobytes() == (fe.profile_radius(F) * 2.0 ** level).tobytes()
+
+
+def test_apart_finds_the_maxima_with_no_other_within_the_distance():
+    rng = np.random.default_rng(4)
+    width = 60
+    for trial in range(20):
+        # Maxima on a 40 x 60 level with offsets of up to half a pixel, a few on one pixel of the other list,
+        # and the second list out of row-major order now and then (the strongest picked out of too many).
+        n, n2 = int(rng.integers(0, 80)), int(rng.integers(0, 120))
+        ys2, xs2 = rng.integers(5, 35, n2), rng.integers(5, 55, n2)
+        ys, xs = rng.integers(5, 35, n), rng.integers(5, 55, n)
+        if n and n2:
+            k = min(n, n2) // 3
+            ys[:k], xs[:k] = ys2[:k] + rng.integers(-1, 2, k), xs2[:k] + rng.integers(-1, 2, k)
+        ox, oy = (rng.uniform(-0.5, 0.5, n).astype(np.float32) for _ in range(2))
+        ox2, oy2 = (rng.uniform(-0.5, 0.5, n2).astype(np.float32) for _ in range(2))
+        if trial % 2 == 0:
+            order = np.lexsort((xs2, ys2))
+            ys2, xs2, ox2, oy2 = ys2[order], xs2[order], ox2[order], oy2[order]
+        for r in (0.3, 0.5, 1.0):
+            got = ck.apart(ys, xs, ox, oy, ys2, xs2, ox2, oy2, width, r)
+            d = np.hypot((ys + oy.astype(np.float64))[:, None] - (ys2 + oy2.astype(np.float64))[None],
+                         (xs + ox.astype(np.float64))[:, None] - (xs2 + ox2.astype(np.float64))[None])
+            want = (d > r).all(1) if n2 else np.ones(n, bool)
+            np.testing.assert_array_equal(got, want)

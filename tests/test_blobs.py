@@ -194,6 +194,30 @@ def test_brim_dots_are_found_at_the_default_threshold(sample_take, white):
     assert found == total
 
 
+def test_thin_dots_beside_the_face_outline_are_found_from_the_narrower_dog(sample_take):
+    """Edge-on black dots 1-3 px inside the face's dark outline (minor semi-axis 0.65-0.85 px).
+
+    On the inverted image the outline's dark background is a bright region beside the dot, and
+    the ordinary DoG's response to it covers the dot: its nearest candidate is 1.7-3.3 px off,
+    and until the narrower DoG of the finest level (``features.thin_candidates``) none of these
+    views was detected.  Seed 0, frame 0: the benchmark's quick frames.
+    """
+    from carapost.core.blobs.detector import as_grey_u8, find_candidates
+
+    for cam, name in ((0, "Cheek_R_9"), (1, "Cheek_R_9"), (2, "Jaw_L_2"), (3, "Jaw_L_2"), (3, "Cheek_L_7")):
+        s = sample_take[False][cam]
+        k = s.names.index(name)
+        assert s.axes[k, 1] < 0.9, (cam, name, s.axes[k])
+        cand, _ = find_candidates(as_grey_u8(s.image), False, 4.0, 50.0)
+        d = np.hypot(cand.x - s.centres[k, 0], cand.y - s.centres[k, 1])
+        assert d[~cand.thin].min() > 1.5 and d[cand.thin].min() < 1.5, (cam, name)
+        rec = detect(s.image)
+        assert np.hypot(rec["x"] - s.centres[k, 0], rec["y"] - s.centres[k, 1]).min() < 0.5, (cam, name)
+    # Only black dots are looked for so (the face's outline is dark, unlike a white dot).
+    cand, _ = find_candidates(as_grey_u8(sample_take[True][0].image), True, 4.0, 50.0)
+    assert not cand.thin.any()
+
+
 @pytest.fixture(scope="module")
 def small_take():
     """One frame of a 35-marker sample take (seed 1, four cameras), black and white markers."""

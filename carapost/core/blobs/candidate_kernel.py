@@ -319,3 +319,38 @@ def pad_level(lvl, border, out):
         row = dst[border:border + W]
         for j in range(W):
             row[j] = np.float32(src[j])
+
+
+@njit(**JIT_EXACT)
+def apart(ys, xs, ox, oy, ys2, xs2, ox2, oy2, width, r):
+    """Which maxima ``(ys + oy, xs + ox)`` have none of ``(ys2 + oy2, xs2 + ox2)`` within ``r`` (<= 1) level px.
+
+    Step 1, the narrower DoG's candidates (:func:`.features.thin_candidates`)
+    beside the ordinary ones, on a level ``width`` px wide.  Offsets are at most
+    half a pixel, so a maximum within 1 px of another is on one of its 8
+    neighbouring pixels or its own: three binary searches each, in the second
+    list sorted row-major (:func:`dog_peaks` gives it so, unless the strongest
+    were picked out of too many).
+    """
+    n, n2 = len(ys), len(ys2)
+    raw = np.empty(n2, np.int64)
+    for q in range(n2):
+        raw[q] = ys2[q] * width + xs2[q]
+    order = np.argsort(raw)
+    key2 = np.empty(n2, np.int64)
+    for q in range(n2):
+        key2[q] = raw[order[q]]
+    out = np.ones(n, np.bool_)
+    rr = r * r
+    for k in range(n):
+        y, x = ys[k] + np.float64(oy[k]), xs[k] + np.float64(ox[k])
+        for dy in range(-1, 2):
+            base = (ys[k] + dy) * width + xs[k]
+            q = np.searchsorted(key2, base - 1)
+            while q < n2 and key2[q] <= base + 1:
+                p = order[q]
+                ey, ex = ys2[p] + np.float64(oy2[p]) - y, xs2[p] + np.float64(ox2[p]) - x
+                if ex * ex + ey * ey <= rr:
+                    out[k] = False
+                q += 1
+    return out

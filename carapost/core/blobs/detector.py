@@ -2,8 +2,8 @@
 
 The four steps of the guide's "Blob detection algorithm":
 
-1. candidate centres — local maxima of a per-octave DoG on an image pyramid
-   (:mod:`.features`);
+1. candidate centres — local maxima of a per-octave DoG on an image pyramid, and
+   for black blobs of a narrower DoG on the finest octave (:mod:`.features`);
 2. the classifier — probability that the candidate is a blob centre
    (:mod:`.model`); candidates below the threshold are dropped;
 3. the boundary and centre — the half-contrast "inside" map of each candidate's
@@ -23,7 +23,7 @@ from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from ..heap import keep_freed_memory
 from . import features as fe
-from .candidate_kernel import engulfing, greedy_nms, profile_radius
+from .candidate_kernel import apart, engulfing, greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .measure_kernel import fit_round, next_round
 from .edges import MERGED, edge_ellipses, refine_centres
@@ -41,6 +41,7 @@ class Candidates:
     noise: float           #: image noise estimate, grey levels
     feats: np.ndarray      #: (N, F) features
     white: bool = False    #: white blobs (searched on the image) or black (on the inverted image)
+    thin: np.ndarray | None = None  #: found by the finest level's narrower DoG only (:func:`.features.thin_candidates`)
 
 
 def as_grey_u8(image) -> np.ndarray:
@@ -84,17 +85,33 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
     levels = fe.levels_for(min_major, max_major)
     pyr = fe.pyramid(bright, levels)
     work = fe.workspace()
-    xs_all, ys_all, lv_all, f_all = [], [], [], []
+    xs_all, ys_all, lv_all, f_all, thin_all = [], [], [], [], []
     b = fe.PATCH_R + 1
     for level, lvl in pyr.items():
         if min(lvl.shape) < 2 * b + 3:
             continue
         lnoise = noise / 2.0 ** level
         padded = fe.padded_level(lvl, b, work, level)
-        ys, xs, dog, g, ox, oy = fe.candidates(padded, max(0.6, 0.5 * lnoise), work, level)
+        floor = max(0.6, 0.5 * lnoise)
+        ys, xs, dog, g, ox, oy = fe.candidates(padded, floor, work, level)
+        thin = np.zeros(len(ys), bool)
+        if not white and level == levels[0]:
+            # Black dots under 1 level px across beside a dark outline (edge-on at the face's silhouette):
+            # the narrower DoG's maxima that are not the ordinary ones' (docs/blobs.md, "Thin dots beside
+            # dark outlines").  White dots are not looked for so: the face's outline is dark, unlike them,
+            # and on the white frames of seeds 0-2 the pass found 1 more dot and 47 more false detections.
+            ty, tx, tdog, tox, toy = fe.thin_candidates(padded, g, max(floor, fe.THIN_FLOOR * lnoise), work, level)
+            new = apart(ty, tx, tox, toy, ys, xs, ox, oy, padded.shape[1], fe.THIN_APART)
+            ys, xs, dog = np.concatenate([ys, ty[new]]), np.concatenate([xs, tx[new]]), np.concatenate([dog, tdog[new]])
+            ox, oy = np.concatenate([ox, tox[new]]), np.concatenate([oy, toy[new]])
+            thin = np.concatenate([thin, np.ones(int(new.sum()), bool)])
         if len(ys) == 0:
             continue
-        f_all.append(fe.features(padded, g, ys, xs, dog, level, noise))
+        thin_all.append(thin)
+        f = fe.features(padded, g, ys, xs, dog, level, noise)
+        # The narrower DoG sees half an octave finer than its level: so the classifier can tell its candidates.
+        f[thin, fe.FEATURE_NAMES.index("level")] = (level - 0.5) / 4.0
+        f_all.append(f)
         scale = 2.0 ** level
         # Not where cv2.pyrDown centres level pixel u (that is u * 2^L): these candidates sit (2^L - 1)/2 px
         # right of and below their blob.  The fit re-centres them; the classifier and the rescue's limits
@@ -106,13 +123,14 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
     if not f_all:
         z = np.zeros(0)
         return Candidates(z, z, z.astype(np.int8), z, noise, np.zeros((0, len(fe.FEATURE_NAMES)), np.float32),
-                          bool(white)), bright
+                          bool(white), z.astype(bool)), bright
     F = np.concatenate(f_all)
     lv = np.concatenate(lv_all)
     # fe.profile_radius(F) * 2.0 ** lv, compiled (the same float32 and float64 arithmetic).
     radius = np.empty(len(F))
     profile_radius(F, lv, radius)
-    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv, radius, noise, F, bool(white)), bright
+    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv, radius, noise, F, bool(white),
+                      np.concatenate(thin_all)), bright
 
 
 #: Rounds of measurement; each re-centres the window on the last answer and sizes it by the last major axis.
