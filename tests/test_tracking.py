@@ -319,44 +319,61 @@ def test_patch_tracking_alone_stops_after_a_few_frames(quiet):
 class _DecodingImages:
     """A take's images as :class:`~carapost.io.frames.TakeFrames` serves them: ``image`` and ``prefetch``.
 
-    Records each ``prefetch`` request and each frame whose image the tracker read before a request
-    had covered it (the frames it would wait for a decoder on).
+    Records the calls in order, and which image reads a ``prefetch`` request had covered before.
     """
 
-    def __init__(self, sc, direction):
-        self.sc, self.direction = sc, direction
-        self.asked: list[tuple[int, int, int]] = []
-        self.covered: set[int] = set()
-        self.waited: set[int] = set()
+    def __init__(self, sc):
+        self.sc = sc
+        self.events: list[tuple] = []
+        self.covered: set[tuple[int, int]] = set()
 
     def image(self, s, f):
-        if f not in self.covered:
-            self.waited.add(f)
+        self.events.append(("read", s, f, (s, f) in self.covered))
         return render(self.sc, s, f)
 
-    def prefetch(self, frame, count=8, step=1):
-        self.asked.append((frame, count, step))
-        self.covered.update(frame + step * i for i in range(1, count + 1))
+    def prefetch(self, frame, count=8, step=1, sensors=None):
+        self.events.append(("ask", frame, count, step, tuple(sensors)))
+        self.covered.update((s, frame + step * i) for s in sensors for i in range(1, count + 1))
 
 
 @pytest.mark.parametrize("direction", [1, -1])
-def test_tracking_decodes_the_next_frames_ahead(quiet, direction):
-    """Track [Sequence] asks the take's images for the frames ahead while it tracks one (a .pico frame of
-    four cameras takes longer to decode than to track); what it tracks is the same as without."""
-    from carapost.core.tracking.api import PREFETCH_FRAMES
+def test_tracking_decodes_the_next_frames_ahead(quiet, direction, monkeypatch):
+    """Track [Sequence] asks the take's images to decode the next frames of the cameras its last two frames
+    both needed, while it tracks one (a .pico frame takes longer to decode than to track); it tracks the same."""
+    from carapost.core.tracking import api
 
     start = 0 if direction > 0 else 11
     end = 11 - start
     sc = fresh(quiet)
+    m, s0 = 3, next(s for s in range(4) if quiet.face_det[0, s, 3] >= 0)
+    for f in range(3, 9):                      # marker 3 tracked by its patch in camera s0 on these frames
+        remove_marker_detection(sc, f, s0, m)
     if direction < 0:
         initialise(sc, start)
     plain = copy.deepcopy(sc)
-    images = _DecodingImages(sc, direction)
+    images = _DecodingImages(sc)
+    step = api.FrameTracker.step
+
+    def logged_step(self, frame, recs):
+        images.events.append(("step", frame))
+        return step(self, frame, recs)
+    monkeypatch.setattr(api.FrameTracker, "step", logged_step)
     track(sc.project, start, direction, end_frame=end, images=images).do(sc.project)
     frames = list(range(start + direction, end + direction, direction))
-    assert images.asked == [(f, PREFETCH_FRAMES, direction) for f in frames]
-    # Only the first frame tracked (and the start frame, for the first patches) is read unannounced.
-    assert images.waited <= {start, start + direction}
+    steps, asks, reads = [], [], []          # the sensors each step read; the requests; covered or not
+    for e in images.events:
+        if e[0] == "step":
+            steps.append(set())
+        elif e[0] == "read":
+            steps[-1].add(e[1])
+            reads.append(e[3])
+        else:
+            asks.append((len(steps), e[1:]))
+    assert [f for f in frames] == [e[1] for e in images.events if e[0] == "step"]
+    want = [(k, (frames[k], api.PREFETCH_FRAMES, direction, tuple(sorted(steps[k - 1] & steps[k - 2]))))
+            for k in range(2, len(frames)) if steps[k - 1] & steps[k - 2]]
+    assert asks == want and len(want) >= 3
+    assert sum(reads) >= 2                     # images the tracker read had been decoded ahead
     track(plain.project, start, direction, end_frame=end, images=lambda s, f: render(plain, s, f)).do(plain.project)
     for q in sc.project.points.values():
         r = plain.project.points[q.id]

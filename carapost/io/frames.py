@@ -66,9 +66,9 @@ class TakeFrames:
             return np.zeros((h, w), np.uint8)
         return self.cache.get(src, k)
 
-    def prefetch(self, frame: int, count: int = 8, step: int = 1) -> None:
-        """Start decoding the next ``count`` frames of every sensor (while playing)."""
-        for sensor in range(self.project.sensor_count):
+    def prefetch(self, frame: int, count: int = 8, step: int = 1, sensors=None) -> None:
+        """Start decoding the next ``count`` frames (``step`` apart) of ``sensors`` (default: every sensor)."""
+        for sensor in range(self.project.sensor_count) if sensors is None else sensors:
             src = self.source(sensor)
             if src is None:
                 continue

@@ -149,21 +149,33 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
             if q.src[start, s] == SRC_DETECTION and 0 <= d < len(recs0[s]):
                 size0[i, s] = (recs0[s][d]["major"], recs0[s][d]["minor"])
     pool = PatchPool(workers)
+    source = _image_source(images)
+    read: set[int] = set()                # the sensors whose images the last frame's tracking read
+
+    def image(s, f):
+        read.add(int(s))
+        return source(s, f)
     tracker = FrameTracker(RigState(project.rig.cameras_at(start)), X0, uv0, size0, brim, params,
-                           images=_image_source(images), pool=pool, start_frame=start)
+                           images=image if source is not None else None, pool=pool, start_frame=start)
     results, cancelled = [], False
     face_ids = np.array([q.id for q in face], np.int64)
     brim_ids = np.array([q.id for q in brim_pts.values()], np.int64)
     brim_idx = np.array(list(brim_pts), np.int64)
-    # A take's images are H.264 (.pico): decoding a frame of four cameras costs more than tracking it,
-    # and the decoder lets other threads run, so the next frames are decoded while this one is tracked.
+    # A take's images are H.264 (.pico): decoding a camera's frame costs more than tracking it, and the
+    # decoder lets other threads run, so the next frames of the cameras the last two frames both needed
+    # (patches, appearance checks) are decoded while this one is tracked.  Only those: a camera whose
+    # images are not needed for a GOP is not decoded at all (a 35-marker take read 99 of 320 camera-frames).
     ahead = getattr(images, "prefetch", None) if images is not None else None
+    before: set[int] = set()
     try:
         for f in frames:
             if progress is not None:
                 progress.check()
-            if ahead is not None:
-                ahead(f, PREFETCH_FRAMES, direction)
+            steady = read & before
+            if ahead is not None and steady:
+                ahead(f, PREFETCH_FRAMES, direction, sensors=sorted(steady))
+            before = set(read)
+            read.clear()
             results.append(tracker.step(f, recs_of(f)))
             if progress is not None:
                 if progress.publishing:
