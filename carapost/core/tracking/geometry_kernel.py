@@ -71,25 +71,31 @@ def _solve_into(m, b, out, i):
 
 
 @njit(**JIT_EXACT)
+def _view_sums(P, uv, w, i, ms, bs, msum, bsum):
+    """Point ``i``'s normal-equation terms of each view into ``ms[s]``, ``bs[s]``, and their sums (view order)."""
+    for j in range(6):
+        msum[j] = 0.0
+    for j in range(3):
+        bsum[j] = 0.0
+    for s in range(w.shape[1]):
+        _view_terms(P, uv, w, i, s, ms[s], bs[s])
+        for j in range(6):
+            msum[j] += ms[s, j]
+        for j in range(3):
+            bsum[j] += bs[s, j]
+
+
+@njit(**JIT_EXACT)
 def dlt_solve(P, uv, w):
     """Weighted DLT points ``(n, 3)`` of ``uv`` (n, S, 2) with view weights ``w`` (n, S) (0: not a view)."""
     n, S = w.shape
     out = np.empty((n, 3))
-    m = np.empty(6)
-    b = np.empty(3)
+    ms = np.empty((S, 6))
+    bs = np.empty((S, 3))
     msum = np.empty(6)
     bsum = np.empty(3)
     for i in range(n):
-        for j in range(6):
-            msum[j] = 0.0
-        for j in range(3):
-            bsum[j] = 0.0
-        for s in range(S):
-            _view_terms(P, uv, w, i, s, m, b)
-            for j in range(6):
-                msum[j] += m[j]
-            for j in range(3):
-                bsum[j] += b[j]
+        _view_sums(P, uv, w, i, ms, bs, msum, bsum)
         _solve_into(msum, bsum, out, i)
     return out
 
@@ -107,16 +113,7 @@ def dlt_held_out(P, uv, w):
     b = np.empty(3)
     row = np.empty((1, 3))
     for i in range(n):
-        for j in range(6):
-            msum[j] = 0.0
-        for j in range(3):
-            bsum[j] = 0.0
-        for s in range(S):
-            _view_terms(P, uv, w, i, s, ms[s], bs[s])
-            for j in range(6):
-                msum[j] += ms[s, j]
-            for j in range(3):
-                bsum[j] += bs[s, j]
+        _view_sums(P, uv, w, i, ms, bs, msum, bsum)
         for s in range(S):
             for j in range(6):
                 m[j] = msum[j] - ms[s, j]
