@@ -137,6 +137,9 @@ def drag_raw(qtbot, view, a, b, mods=Qt.KeyboardModifier.NoModifier, button=Qt.M
     for (x0, y0), (x1, y1) in zip(corners, corners[1:]):
         pts += [(x0 + (x1 - x0) * t, y0 + (y1 - y0) * t) for t in np.linspace(0, 1, steps + 1)[1:]]
     QTest.mousePress(vp, button, mods, view.raw_to_viewport(*a))
+    # The press goes through the window system's queue, the moves below straight to the viewport: let the
+    # press arrive first, or the scene sees moves with no press, then a click (the selection cleared).
+    QApplication.processEvents()
     for q in pts:
         # QTest.mouseMove sends no modifiers; a user holding Shift does.
         local = QPointF(view.raw_to_viewport(*q))
@@ -144,6 +147,7 @@ def drag_raw(qtbot, view, a, b, mods=Qt.KeyboardModifier.NoModifier, button=Qt.M
                          button, mods)
         QApplication.sendEvent(vp, ev)
     QTest.mouseRelease(vp, button, mods, view.raw_to_viewport(*b))
+    QApplication.processEvents()
 
 
 def drag_widget(widget, points, mods=Qt.KeyboardModifier.NoModifier, button=Qt.MouseButton.LeftButton):
