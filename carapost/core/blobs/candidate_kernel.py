@@ -18,7 +18,10 @@ from numba import njit
 
 # JIT_EXACT for dog_peaks and the other numpy twins: nothing to vectorise there needs fastmath, and the
 # sub-pixel offsets must be numpy's float32 arithmetic, operation for operation.
-from .measure_kernel import JIT, JIT_EXACT
+from ..jit import JIT, JIT_EXACT
+
+#: The ``level`` feature is the candidate's pyramid level over this.
+LEVEL_SCALE = 4.0
 
 
 @njit(**JIT_EXACT)
@@ -177,7 +180,7 @@ def candidate_features(lvl, g, ys, xs, dog, level, noise, rings, ring_ptr, secto
         F[c, 8] = d / contrast
         F[c, 9] = outer / 255.0
         F[c, 10] = centre / 255.0
-        F[c, 11] = level / 4.0
+        F[c, 11] = level / LEVEL_SCALE
         F[c, 12] = math.log(max(d, 1e-3) / lnoise)
         F[c, 13] = math.sqrt(ivar / len(inner)) / contrast
 
@@ -328,9 +331,9 @@ def apart(ys, xs, ox, oy, ys2, xs2, ox2, oy2, width, r):
     Step 1, the narrower DoG's candidates (:func:`.features.thin_candidates`)
     beside the ordinary ones, on a level ``width`` px wide.  Offsets are at most
     half a pixel, so a maximum within 1 px of another is on one of its 8
-    neighbouring pixels or its own: three binary searches each, in the second
-    list sorted row-major (:func:`dog_peaks` gives it so, unless the strongest
-    were picked out of too many).
+    neighbouring pixels or its own: the second list is sorted row-major here
+    (:func:`dog_peaks` gives it so, but not after the strongest were picked out
+    of too many), then three binary searches for each maximum of the first.
     """
     n, n2 = len(ys), len(ys2)
     raw = np.empty(n2, np.int64)

@@ -23,7 +23,7 @@ from ..detections import COLOR_BLACK, COLOR_WHITE, DET_DTYPE
 from ..errors import CaraError
 from ..heap import keep_freed_memory
 from . import features as fe
-from .candidate_kernel import apart, engulfing, greedy_nms, profile_radius
+from .candidate_kernel import LEVEL_SCALE, apart, engulfing, greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .measure_kernel import fit_round, next_round
 from .edges import MERGED, edge_ellipses, refine_centres
@@ -110,7 +110,7 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
         thin_all.append(thin)
         f = fe.features(padded, g, ys, xs, dog, level, noise)
         # The narrower DoG sees half an octave finer than its level: so the classifier can tell its candidates.
-        f[thin, fe.FEATURE_NAMES.index("level")] = (level - 0.5) / 4.0
+        f[thin, fe.FEATURE_NAMES.index("level")] = (level - 0.5) / LEVEL_SCALE
         f_all.append(f)
         scale = 2.0 ** level
         # Not where cv2.pyrDown centres level pixel u (that is u * 2^L): these candidates sit (2^L - 1)/2 px

@@ -39,7 +39,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .measure_kernel import JIT, JIT_EXACT
+from ..jit import JIT, JIT_EXACT
 
 #: Normals sampled around each ellipse.
 RAYS = 48

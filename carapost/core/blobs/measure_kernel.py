@@ -27,10 +27,8 @@ import math
 import numpy as np
 from numba import njit
 
-#: Options of every kernel (see the module's docstring).
-JIT = dict(cache=True, nogil=True, fastmath={"reassoc"})
-#: Options of the kernels that must do numpy's arithmetic operation for operation (no ``fastmath``).
-JIT_EXACT = dict(cache=True, nogil=True)
+from ..jit import JIT, JIT_EXACT
+
 
 
 @njit(**JIT)

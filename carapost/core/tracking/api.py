@@ -24,7 +24,7 @@ from .patch import PatchPool
 
 #: Threads for patch matching (the target machine has 2 cores).
 DEFAULT_WORKERS = 2
-#: Frames of every camera decoded ahead of the tracker, in the frame cache's worker threads.
+#: Frames decoded ahead of the tracker, of the cameras it is reading, in the frame cache's worker threads.
 PREFETCH_FRAMES = 4
 
 
@@ -150,31 +150,32 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
                 size0[i, s] = (recs0[s][d]["major"], recs0[s][d]["minor"])
     pool = PatchPool(workers)
     source = _image_source(images)
-    read: set[int] = set()                # the sensors whose images the last frame's tracking read
-
-    def image(s, f):
-        read.add(int(s))
-        return source(s, f)
-    tracker = FrameTracker(RigState(project.rig.cameras_at(start)), X0, uv0, size0, brim, params,
-                           images=image if source is not None else None, pool=pool, start_frame=start)
-    results, cancelled = [], False
-    face_ids = np.array([q.id for q in face], np.int64)
-    brim_ids = np.array([q.id for q in brim_pts.values()], np.int64)
-    brim_idx = np.array(list(brim_pts), np.int64)
     # A take's images are H.264 (.pico): decoding a camera's frame costs more than tracking it, and the
     # decoder lets other threads run, so the next frames of the cameras the last two frames both needed
     # (patches, appearance checks) are decoded while this one is tracked.  Only those: a camera whose
     # images are not needed for a GOP is not decoded at all (a 35-marker take read 99 of 320 camera-frames).
-    ahead = getattr(images, "prefetch", None) if images is not None else None
+    ahead = getattr(images, "prefetch", None)
+    read: set[int] = set()                # the sensors whose images the last frame's tracking read
+    if ahead is not None:
+        def image(s, f, source=source):
+            read.add(int(s))
+            return source(s, f)
+        source = image
+    tracker = FrameTracker(RigState(project.rig.cameras_at(start)), X0, uv0, size0, brim, params,
+                           images=source, pool=pool, start_frame=start)
+    results, cancelled = [], False
+    face_ids = np.array([q.id for q in face], np.int64)
+    brim_ids = np.array([q.id for q in brim_pts.values()], np.int64)
+    brim_idx = np.array(list(brim_pts), np.int64)
     before: set[int] = set()
     try:
         for f in frames:
             if progress is not None:
                 progress.check()
-            steady = read & before
-            if ahead is not None and steady:
-                ahead(f, PREFETCH_FRAMES, direction, sensors=sorted(steady))
-            before = set(read)
+            steady = sorted(read & before)          # always empty where the images cannot prefetch
+            if steady:
+                ahead(f, PREFETCH_FRAMES, direction, sensors=steady)
+            before = read.copy()
             read.clear()
             results.append(tracker.step(f, recs_of(f)))
             if progress is not None:

@@ -5,7 +5,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from ..blobs.measure_kernel import JIT_EXACT
+from ..jit import JIT_EXACT
 
 from .nearest import SortedSweep
 

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from ..blobs.measure_kernel import JIT_EXACT
+from ..jit import JIT_EXACT
 
 #: Neighbours per point.
 K_NEIGHBOURS = 6
@@ -184,7 +184,7 @@ def _spreads(cand, use, weight, rows):
     return v, w, spread
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(error_model="numpy", **JIT_EXACT)
 def _weighted_median(cost, v, use, rows, pred):
     """Into ``pred[rows]``: per coordinate the mean of the votes whose weighted cost ``cost`` (m, 3, K, 1) is least.
 

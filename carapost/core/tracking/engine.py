@@ -152,7 +152,7 @@ class FrameData:
 
     def tree(self):
         if self._tree is None and self.offsets[-1]:
-            shifted = np.concatenate(self.xy)
+            shifted = self.xy_all.copy()
             shifted[:, 0] += self.sensor * self.SENSOR_GAP
             self._tree = SortedSweep(shifted)
         return self._tree

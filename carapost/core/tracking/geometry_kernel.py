@@ -1,4 +1,6 @@
-"""Compiled loops of the tracker's linear triangulation (:func:`.geometry.triangulate`, :func:`.geometry.held_out_errors`).
+"""Compiled loops of the tracker's geometry: linear triangulation (:func:`.geometry.triangulate`,
+:func:`.geometry.held_out_errors`), projection and reprojection errors, and pose refinement's
+residuals and Jacobian (:func:`.geometry.refine_poses`).
 
 As numpy, each solve was ~40 array operations on (components, views, points)
 arrays of a few hundred points (the DLT rows, their products, the sum over views,
@@ -20,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..blobs.measure_kernel import JIT_EXACT
+from ..jit import JIT_EXACT
 
 
 @njit(**JIT_EXACT)

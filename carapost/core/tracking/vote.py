@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..blobs.measure_kernel import JIT_EXACT
+from ..jit import JIT_EXACT
 from .assign import candidates
 
 #: Views with this many asked neighbours are asked too.
