@@ -259,6 +259,10 @@ def choose_seeds(scene: Scene, truth: dict, frame: int = 0, n_brim: int = 6, n_f
     # a nostril rim, where a dot is harder to find), facing the cameras that click
     # them, and seen by both channels of a caddy.
     hard = ("Brow", "Eyelid", "Lip", "Mouth", "Nostril", "Temple")
+    if scene.white:
+        # A white nose tip is lit to saturation and merges with the nose's highlight: no blob to click
+        # (a 100-marker white take's seeds had none within 6 px, and `carapost process` stopped there).
+        hard += ("Nose_Tip",)
     easy, rest = [], []
     for i in range(nf):
         u, v = scene.markers.p[i]
