@@ -126,11 +126,11 @@ def one(markers: int, seed: int, frames: int, directions=(+1, -1), white: bool =
 
 
 def run(quick: bool = False) -> list[dict]:
-    """One row per take and direction (quick: 35 markers, seed 1, 60 frames, both directions; full: 35/seed 1
-    black and white, 100/seed 2 and 156/seed 0, 300 frames, forwards from frame 0 and backwards from the last
+    """One row per take and direction (quick: 35 markers, seed 1, 60 frames, both directions; full: 35/seed 1,
+    100/seed 2 and 156/seed 0, black and white, 300 frames, forwards from frame 0 and backwards from the last
     frame)."""
     takes = [(35, 1, 60, False)] if quick else [(35, 1, 300, False), (35, 1, 300, True), (100, 2, 300, False),
-                                                (156, 0, 300, False)]
+                                                (100, 2, 300, True), (156, 0, 300, False), (156, 0, 300, True)]
     rows = []
     for markers, seed, frames, white in takes:
         for direction, r in one(markers, seed, frames, white=white).items():
