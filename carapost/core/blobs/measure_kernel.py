@@ -58,46 +58,56 @@ def window_gradients(P, n, tmp, gx, gy):
     Step 3, the radial-symmetry centre's lines: 2x2 differences (symmetric about
     each half-pixel point), then a 3x3 mean with the edge rows and columns
     replicated, which steadies each line's direction.  Fills the flat ``(n-1)^2``
-    ``gx``, ``gy`` (``tmp`` is ``(4, >= (n-1)^2)`` scratch).
+    ``gx``, ``gy`` (``tmp`` is ``(4, >= (n-1) n)`` scratch).
     """
     m = n - 1
     rx, ry, vx, vy = tmp[0], tmp[1], tmp[2], tmp[3]
-    # Rows as slices indexed by the loop counter: numba then knows no index is negative
-    # (no wrap-around test per element) and the loops vectorise.
-    for i in range(m):
-        Pa, Pb = P[i * n:i * n + n], P[(i + 1) * n:(i + 1) * n + n]
-        rxi, ryi = rx[i * m:i * m + m], ry[i * m:i * m + m]
+    # The differences and the sums of three rows are laid out with the window's row stride n (column
+    # m of each row is not used), so that each is one loop over the flat window: loops over rows of
+    # 10-56 pixels ran mostly in their scalar remainders.  Slices indexed by the loop counter: numba
+    # then knows no index is negative (no wrap-around test per element) and the loops vectorise.
+    L = m * n - 1
+    Pa, Pb, Pc, Pd = P[0:L], P[1:L + 1], P[n:L + n], P[n + 1:L + n + 1]
+    rxa, rya = rx[0:L], ry[0:L]
+    for k in range(L):
+        s = Pd[k] - Pa[k]
+        t = Pc[k] - Pb[k]
+        rxa[k] = 0.5 * (s - t)
+        rya[k] = 0.5 * (s + t)
+    # The 3x3 sum: sums of three rows (the edge rows replicated), then of three columns.
+    last = (m - 1) * n
+    below = min(n, last)
+    for j in range(m):
+        vx[j] = rx[j] + rx[j] + rx[below + j]
+        vy[j] = ry[j] + ry[j] + ry[below + j]
+    if m > 1:
         for j in range(m):
-            s = Pb[j + 1] - Pa[j]
-            t = Pb[j] - Pa[j + 1]
-            rxi[j] = 0.5 * (s - t)
-            ryi[j] = 0.5 * (s + t)
-    # The 3x3 sum: sums of three rows, then of three columns.
-    for i in range(m):
-        u = max(i - 1, 0) * m
-        c = i * m
-        d = min(i + 1, m - 1) * m
+            vx[last + j] = rx[last - n + j] + rx[last + j] + rx[last + j]
+            vy[last + j] = ry[last - n + j] + ry[last + j] + ry[last + j]
+    if m > 2:
+        K = last - n
         # One output per loop: with two, the loop read six rows and wrote two that might overlap them,
         # more pairs than LLVM tests at run time, and it was not vectorised.
-        ru, rc, rd, vxi = rx[u:u + m], rx[c:c + m], rx[d:d + m], vx[c:c + m]
-        for j in range(m):
-            vxi[j] = ru[j] + rc[j] + rd[j]
-        su, sc, sd, vyi = ry[u:u + m], ry[c:c + m], ry[d:d + m], vy[c:c + m]
-        for j in range(m):
-            vyi[j] = su[j] + sc[j] + sd[j]
+        ru, rc, rd, vxa = rx[0:K], rx[n:K + n], rx[2 * n:K + 2 * n], vx[n:K + n]
+        for k in range(K):
+            vxa[k] = ru[k] + rc[k] + rd[k]
+        su, sc, sd, vya = ry[0:K], ry[n:K + n], ry[2 * n:K + 2 * n], vy[n:K + n]
+        for k in range(K):
+            vya[k] = su[k] + sc[k] + sd[k]
     ninth = 1.0 / 9.0
     for i in range(m):
         c = i * m
-        gx[c] = (vx[c] + vx[c] + vx[c + 1]) * ninth
-        gy[c] = (vy[c] + vy[c] + vy[c + 1]) * ninth
-        a, b = vx[c:c + m], vy[c:c + m]
+        e = i * n
+        gx[c] = (vx[e] + vx[e] + vx[e + 1]) * ninth
+        gy[c] = (vy[e] + vy[e] + vy[e + 1]) * ninth
+        a, b = vx[e:e + m], vy[e:e + m]
         ox, oy = gx[c + 1:c + m - 1], gy[c + 1:c + m - 1]
         for j in range(m - 2):
             ox[j] = (a[j] + a[j + 1] + a[j + 2]) * ninth
         for j in range(m - 2):
             oy[j] = (b[j] + b[j + 1] + b[j + 2]) * ninth
-        gx[c + m - 1] = (vx[c + m - 2] + vx[c + m - 1] + vx[c + m - 1]) * ninth
-        gy[c + m - 1] = (vy[c + m - 2] + vy[c + m - 1] + vy[c + m - 1]) * ninth
+        gx[c + m - 1] = (vx[e + m - 2] + vx[e + m - 1] + vx[e + m - 1]) * ninth
+        gy[c + m - 1] = (vy[e + m - 2] + vy[e + m - 1] + vy[e + m - 1]) * ninth
 
 
 @njit(**JIT)
