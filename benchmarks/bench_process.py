@@ -150,12 +150,12 @@ def one(markers: int, seed: int, frames: int, white: bool = False) -> dict:
 
 def run(quick: bool = False) -> list[dict]:
     """One row per take: README.md's quick-start take (35 markers, seed 1, 120 frames) black and white; the
-    full run adds seeds 0 and 2 and 100 markers (seed 2)."""
+    full run adds seeds 0 and 2 (seed 2 white too) and 100 markers (seed 2)."""
     takes = [(35, 1, 120, False), (35, 1, 120, True)]
     if quick:
         takes = [(35, 1, 40, False)]
     else:
-        takes += [(35, 0, 120, False), (35, 2, 120, False), (100, 2, 120, False)]
+        takes += [(35, 0, 120, False), (35, 2, 120, False), (35, 2, 120, True), (100, 2, 120, False)]
     rows = []
     for markers, seed, frames, white in takes:
         r = one(markers, seed, frames, white)
