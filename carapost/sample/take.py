@@ -279,7 +279,8 @@ def choose_seeds(scene: Scene, truth: dict, frame: int = 0, n_brim: int = 6, n_f
     face = []
     if cand:
         pts = g.points[[i for i, _ in cand]]
-        start = next((k for k, (i, _) in enumerate(cand) if scene.markers.labels[i] == "Nose_Tip"), 0)
+        # From the nose tip where it is plain (``easy`` comes first in ``cand``): never from a hard one.
+        start = next((k for k, (i, _) in enumerate(easy) if scene.markers.labels[i] == "Nose_Tip"), 0)
         for k in _farthest(pts, n_face, start):
             i, chans = cand[k]
             face.append({"label": scene.markers.labels[i], "uv": {str(c): click(c, i) for c in chans}})
