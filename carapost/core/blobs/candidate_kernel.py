@@ -25,11 +25,16 @@ LEVEL_SCALE = 4.0
 
 
 @njit(**JIT_EXACT)
-def _dog_row(g, s, i, out):
-    """Row ``i`` of the DoG ``g - s`` (float32, as numpy subtracts) into ``out``."""
-    gi, si = g[i], s[i]
-    for j in range(len(out)):
-        out[j] = gi[j] - si[j]
+def _dog_row(g, s, i, out, r):
+    """Row ``i`` of the DoG ``g - s`` (float32, as numpy subtracts) into row ``r`` of ``out``.
+
+    Unsigned two-dimensional indices, not row views: numba then tests no wrap-around per
+    pixel, and a view costs an atomic reference count taken and dropped.
+    """
+    ui, ur = np.uint64(i), np.uint64(r)
+    for j in range(out.shape[1]):
+        uj = np.uint64(j)
+        out[ur, uj] = g[ui, uj] - s[ui, uj]
 
 
 @njit(**JIT_EXACT)
@@ -38,6 +43,48 @@ def _grow(a, n):
     out = np.empty(n, a.dtype)
     out[:len(a)] = a
     return out
+
+
+@njit(**JIT_EXACT)
+def _scan(g, s, floor, border, R, rot, i0, ys, xs, v, ox, oy):
+    """Rows ``i0 ..`` of :func:`dog_peaks`' search, until the output arrays are full; returns ``(next row, count)``.
+
+    ``R`` holds the DoG rows above, at and below the row searched (rows ``rot``, rotated
+    by index, not as row views).  The output arrays are not reassigned here: an array
+    variable reassigned inside a loop (grown) had its reference count taken and dropped,
+    two locked instructions, at every maximum stored (8,000 a frame).
+    """
+    H, W = g.shape
+    n = W - 2 * border
+    cap = len(ys)
+    half, two, tiny, lim = np.float32(0.5), np.float32(2.0), np.float32(-1e-6), np.float32(0.5)
+    k = 0
+    for i in range(i0, H - border):
+        if k + n > cap:
+            return i, k
+        _dog_row(g, s, i + 1, R, rot[2])
+        uu, um, ud = np.uint64(rot[0]), np.uint64(rot[1]), np.uint64(rot[2])
+        one = np.uint64(1)
+        for q in range(n):
+            j = np.uint64(q + border)
+            m = R[um, j]
+            if not (m > floor and m >= R[um, j - one] and m >= R[um, j + one]):
+                continue
+            l, r = R[um, j - one], R[um, j + one]
+            u, b = R[uu, j], R[ud, j]
+            if (m >= R[uu, j - one] and m >= u and m >= R[uu, j + one]
+                    and m >= R[ud, j - one] and m >= b and m >= R[ud, j + one]):
+                ys[k] = i
+                xs[k] = q + border
+                v[k] = m
+                # numpy's float32 arithmetic: 0.5 * (l - r) / minimum(l + r - 2 m, -1e-6), clipped.
+                dx = half * (l - r) / min(l + r - two * m, tiny)
+                dy = half * (u - b) / min(u + b - two * m, tiny)
+                ox[k] = min(max(dx, -lim), lim)
+                oy[k] = min(max(dy, -lim), lim)
+                k += 1
+        rot[0], rot[1], rot[2] = rot[1], rot[2], rot[0]
+    return H - border, k
 
 
 @njit(**JIT_EXACT)
@@ -51,48 +98,30 @@ def dog_peaks(g, s, floor, border):
     three rows at a time, never as a whole image.
     """
     H, W = g.shape
-    # Grown by doubling: room for every pixel (a flat plateau above the floor is all maxima) would be
-    # megabytes mapped and unmapped per level, and page faults cost more than the search.
-    cap = 1024
+    if H - 2 * border <= 0 or W - 2 * border <= 0:
+        e = np.empty(0, np.float32)
+        return np.empty(0, np.int64), np.empty(0, np.int64), e, e.copy(), e.copy()
+    # Grown by doubling, a chunk of rows at a time (each chunk's room is at least a row's worth):
+    # room for every pixel (a flat plateau above the floor is all maxima) would be megabytes
+    # mapped and unmapped per level, and page faults cost more than the search.
+    cap = max(1024, 2 * W)
     ys = np.empty(cap, np.int64)
     xs = np.empty(cap, np.int64)
     v = np.empty(cap, np.float32)
     ox = np.empty(cap, np.float32)
     oy = np.empty(cap, np.float32)
-    k = 0
-    if H - 2 * border <= 0 or W - 2 * border <= 0:
-        return ys[:0].copy(), xs[:0].copy(), v[:0].copy(), ox[:0].copy(), oy[:0].copy()
-    up = np.empty(W, np.float32)
-    mid = np.empty(W, np.float32)
-    down = np.empty(W, np.float32)
-    n = W - 2 * border
-    half, two, tiny, lim = np.float32(0.5), np.float32(2.0), np.float32(-1e-6), np.float32(0.5)
-    _dog_row(g, s, border - 1, up)
-    _dog_row(g, s, border, mid)
-    for i in range(border, H - border):
-        _dog_row(g, s, i + 1, down)
-        left, c, right = mid[border - 1:border - 1 + n], mid[border:border + n], mid[border + 1:border + 1 + n]
-        for q in range(n):
-            if not (c[q] > floor and c[q] >= left[q] and c[q] >= right[q]):
-                continue
-            j = q + border
-            m = mid[j]
-            if (m >= up[j - 1] and m >= up[j] and m >= up[j + 1] and m >= down[j - 1] and m >= down[j]
-                    and m >= down[j + 1]):
-                if k == cap:
-                    cap *= 2
-                    ys, xs, v, ox, oy = _grow(ys, cap), _grow(xs, cap), _grow(v, cap), _grow(ox, cap), _grow(oy, cap)
-                ys[k] = i
-                xs[k] = j
-                v[k] = m
-                l, r, u, b = mid[j - 1], mid[j + 1], up[j], down[j]
-                # numpy's float32 arithmetic: 0.5 * (l - r) / minimum(l + r - 2 m, -1e-6), clipped.
-                dx = half * (l - r) / min(l + r - two * m, tiny)
-                dy = half * (u - b) / min(u + b - two * m, tiny)
-                ox[k] = min(max(dx, -lim), lim)
-                oy[k] = min(max(dy, -lim), lim)
-                k += 1
-        up, mid, down = mid, down, up
+    R = np.empty((3, W), np.float32)
+    rot = np.array([0, 1, 2])
+    _dog_row(g, s, border - 1, R, 0)
+    _dog_row(g, s, border, R, 1)
+    i, k = border, 0
+    while True:
+        i, got = _scan(g, s, floor, border, R, rot, i, ys[k:], xs[k:], v[k:], ox[k:], oy[k:])
+        k += got
+        if i >= H - border:
+            break
+        cap *= 2
+        ys, xs, v, ox, oy = _grow(ys[:k], cap), _grow(xs[:k], cap), _grow(v[:k], cap), _grow(ox[:k], cap), _grow(oy[:k], cap)
     return ys[:k].copy(), xs[:k].copy(), v[:k].copy(), ox[:k].copy(), oy[:k].copy()
 
 

@@ -138,7 +138,7 @@ def _sobel_box(img, x0, y0, nx, ny, buf, gx, gy):
         fy[q] = ((g[q] + 2.0 * h[q] + k[q]) - (a[q] + 2.0 * b[q] + c[q])) * 0.125
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _sample(gx, gy, x0, y0, px, py):
     """Bicubic gradient at image point ``(px, py)`` from the box gradients (the image's edge replicated)."""
     ix, iy = math.floor(px), math.floor(py)
@@ -146,19 +146,22 @@ def _sample(gx, gy, x0, y0, px, py):
     v0, v1, v2, v3 = _cubic(py - iy)
     # The box reaches 2 px beyond every sample (see _edge_points): no tap needs clamping, so the
     # indices are never negative (unsigned: numba then tests no wrap-around per tap).
+    # Two-dimensional indices, not row views: a view is an atomic reference count taken and
+    # dropped (two locked instructions), and these taps were ~30,000 of them a frame.
     c0, r0 = np.uint64(int(ix) - 1 - x0), np.uint64(int(iy) - 1 - y0)
+    c1, c2, c3 = c0 + np.uint64(1), c0 + np.uint64(2), c0 + np.uint64(3)
     sx = sy = 0.0
     for j in range(4):
-        rx, ry = gx[r0 + np.uint64(j)], gy[r0 + np.uint64(j)]
-        ax = w0 * rx[c0] + w1 * rx[c0 + np.uint64(1)] + w2 * rx[c0 + np.uint64(2)] + w3 * rx[c0 + np.uint64(3)]
-        ay = w0 * ry[c0] + w1 * ry[c0 + np.uint64(1)] + w2 * ry[c0 + np.uint64(2)] + w3 * ry[c0 + np.uint64(3)]
+        r = r0 + np.uint64(j)
+        ax = w0 * gx[r, c0] + w1 * gx[r, c1] + w2 * gx[r, c2] + w3 * gx[r, c3]
+        ay = w0 * gy[r, c0] + w1 * gy[r, c1] + w2 * gy[r, c2] + w3 * gy[r, c3]
         wy = v0 if j == 0 else (v1 if j == 1 else (v2 if j == 2 else v3))
         sx += wy * ax
         sy += wy * ay
     return sx, sy
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _bilinear(gx, gy, x0, y0, px, py):
     """Bilinear gradient at image point ``(px, py)`` from the box gradients (for the coarse search)."""
     ny = nx = gx.shape[0]             # the box is square (its last two columns are not used)
@@ -171,7 +174,7 @@ def _bilinear(gx, gy, x0, y0, px, py):
             w00 * gy[r0, c0] + w01 * gy[r0, c1] + w10 * gy[r1, c0] + w11 * gy[r1, c1])
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _fall(gx, gy, x0, y0, px, py, nx, ny, t):
     """The outward fall of intensity at ``t`` along the normal ``(nx, ny)`` from ``(px, py)`` (bicubic)."""
     sx, sy = _sample(gx, gy, x0, y0, px + nx * t, py + ny * t)
@@ -261,17 +264,21 @@ def _smallest_eigenvector(S):
             L[i, j] = t / d
     z = np.array([1.0, 0.0, 1.0, 0.0, 0.0, -1.0])
     y = np.empty(6)
+    # The diagonal's reciprocals once: the solves below are then chains of products, not of divisions.
+    r = np.empty(6)
+    for i in range(6):
+        r[i] = 1.0 / L[i, i]
     for _ in range(6):
         for i in range(6):                      # L y = z
             t = z[i]
             for k in range(i):
                 t -= L[i, k] * y[k]
-            y[i] = t / L[i, i]
+            y[i] = t * r[i]
         for i in range(5, -1, -1):              # L^T z = y
             t = y[i]
             for k in range(i + 1, 6):
                 t -= L[k, i] * z[k]
-            z[i] = t / L[i, i]
+            z[i] = t * r[i]
         # Loops, not array expressions: numba names a cached array expression after an address that
         # another cached function, compiled in another process, can share (wrong code, or a crash).
         norm = 0.0

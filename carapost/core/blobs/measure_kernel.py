@@ -51,7 +51,7 @@ def rows(c, reach, off, size):
     return max(int(math.floor(c - reach + off)) - 1, 0), min(int(math.ceil(c + reach + off)) + 2, size)
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def window_gradients(P, n, tmp, gx, gy):
     """Gradients on the half-pixel grid of the flat ``n x n`` window ``P``, each the 3x3 mean of its neighbours.
 
@@ -110,7 +110,7 @@ def window_gradients(P, n, tmp, gx, gy):
         gy[c + m - 1] = (vy[e + m - 2] + vy[e + m - 1] + vy[e + m - 1]) * ninth
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def gradient_sums(gx, gy, m, sums):
     """``sums = (sum gx, sum gy, sum gx^2, sum gy^2)`` over the flat ``m x m`` gradients (:func:`window_gradients`).
 
@@ -127,7 +127,7 @@ def gradient_sums(gx, gy, m, sums):
     sums[0], sums[1], sums[2], sums[3] = sx, sy, sxx, syy
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def ring_plane(P, X, Y, h, cx, cy, r, noise, ring_in, ring_out, slope_k, plane):
     """Background plane ``b + gx x + gy y`` fitted to the ring ``r + ring_in .. r + ring_out`` about (cx, cy).
 
@@ -183,7 +183,7 @@ def ring_plane(P, X, Y, h, cx, cy, r, noise, ring_in, ring_out, slope_k, plane):
     return s0
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def lines_centre(gx0, gy0, GX, GY, h, plane, cx, cy, reach, inv, noise, lim, sol):
     """One radial-symmetry solve about (cx, cy): the point nearest the gradient lines.
 
@@ -224,7 +224,7 @@ def lines_centre(gx0, gy0, GX, GY, h, plane, cx, cy, reach, inv, noise, lim, sol
     sol[1] = min(max(cy, -lim), lim)
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def inside_moments(D, X, Y, h, a, cx, cy, reach, inv, mom):
     """Tapered moments of the half-contrast inside map ``clip(2 d / a - 0.5, 0, 1)`` about (cx, cy).
 
