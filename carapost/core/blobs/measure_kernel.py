@@ -95,19 +95,23 @@ def window_gradients(P, n, tmp, gx, gy):
         for k in range(K):
             vya[k] = su[k] + sc[k] + sd[k]
     ninth = 1.0 / 9.0
+    # Unsigned offsets, not row views: a view is an atomic reference count taken and dropped,
+    # four a row here (~100 a window), and unsigned indices need no wrap-around test either.
+    u1, u2 = np.uint64(1), np.uint64(2)
+    um = np.uint64(m)
     for i in range(m):
-        c = i * m
-        e = i * n
-        gx[c] = (vx[e] + vx[e] + vx[e + 1]) * ninth
-        gy[c] = (vy[e] + vy[e] + vy[e + 1]) * ninth
-        a, b = vx[e:e + m], vy[e:e + m]
-        ox, oy = gx[c + 1:c + m - 1], gy[c + 1:c + m - 1]
+        c = np.uint64(i * m)
+        e = np.uint64(i * n)
+        gx[c] = (vx[e] + vx[e] + vx[e + u1]) * ninth
+        gy[c] = (vy[e] + vy[e] + vy[e + u1]) * ninth
         for j in range(m - 2):
-            ox[j] = (a[j] + a[j + 1] + a[j + 2]) * ninth
+            q = np.uint64(j)
+            gx[c + u1 + q] = (vx[e + q] + vx[e + q + u1] + vx[e + q + u2]) * ninth
         for j in range(m - 2):
-            oy[j] = (b[j] + b[j + 1] + b[j + 2]) * ninth
-        gx[c + m - 1] = (vx[e + m - 2] + vx[e + m - 1] + vx[e + m - 1]) * ninth
-        gy[c + m - 1] = (vy[e + m - 2] + vy[e + m - 1] + vy[e + m - 1]) * ninth
+            q = np.uint64(j)
+            gy[c + u1 + q] = (vy[e + q] + vy[e + q + u1] + vy[e + q + u2]) * ninth
+        gx[c + um - u1] = (vx[e + um - u2] + vx[e + um - u1] + vx[e + um - u1]) * ninth
+        gy[c + um - u1] = (vy[e + um - u2] + vy[e + um - u1] + vy[e + um - u1]) * ninth
 
 
 @njit(inline="always", **JIT)
@@ -142,9 +146,11 @@ def ring_plane(P, X, Y, h, cx, cy, r, noise, ring_in, ring_out, slope_k, plane):
     rb = rx = ry = sd2 = 0.0
     n = 2 * h + 1
     i0, i1 = rows(cy, r + ring_out, h, n)
-    # Views of the rows (a loop starting past 0 was not vectorised: 3x slower).
-    P, X, Y = P[i0 * n:i1 * n], X[i0 * n:i1 * n], Y[i0 * n:i1 * n]
-    for k in range(len(X)):
+    # The rows by unsigned offsets (no views: each is an atomic reference count; a loop starting past
+    # 0 with signed indices was not vectorised, 3x slower).
+    k0 = np.uint64(i0 * n)
+    for kk in range(i1 * n - i0 * n):
+        k = k0 + np.uint64(kk)
         x = X[k]
         y = Y[k]
         dx = x - cx
@@ -199,8 +205,9 @@ def lines_centre(gx0, gy0, GX, GY, h, plane, cx, cy, reach, inv, noise, lim, sol
     sxx = syy = sxy = bx = by = 0.0
     m = 2 * h
     i0, i1 = rows(cy, reach, h - 0.5, m)
-    gx0, gy0, GX, GY = gx0[i0 * m:i1 * m], gy0[i0 * m:i1 * m], GX[i0 * m:i1 * m], GY[i0 * m:i1 * m]
-    for k in range(len(GX)):
+    k0 = np.uint64(i0 * m)
+    for kk in range(i1 * m - i0 * m):
+        k = k0 + np.uint64(kk)
         px = GX[k]
         py = GY[k]
         dx = px - cx
@@ -237,8 +244,9 @@ def inside_moments(D, X, Y, h, a, cx, cy, reach, inv, mom):
     m0 = mx = my = mxx = myy = mxy = 0.0
     n = 2 * h + 1
     i0, i1 = rows(cy, reach, h, n)
-    D, X, Y = D[i0 * n:i1 * n], X[i0 * n:i1 * n], Y[i0 * n:i1 * n]
-    for k in range(len(X)):
+    k0 = np.uint64(i0 * n)
+    for kk in range(i1 * n - i0 * n):
+        k = k0 + np.uint64(kk)
         dx = X[k] - cx
         dy = Y[k] - cy
         v = min(max(D[k] * s - 0.5, 0.0), 1.0) * taper(dx * dx + dy * dy, reach, inv)
