@@ -290,7 +290,7 @@ def _smallest_eigenvector(S):
     return z
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _conic_fit(u, v, w, scale, res):
     """Weighted algebraic conic fit of points ``(u, v)`` (scaled); centre and geometric residuals (px).
 
@@ -352,7 +352,7 @@ def _scatter(u, v, w, S):
             S[i, j] = S[j, i]
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _conic_solve(u, v, w, scale, res):
     """:func:`_conic_fit` that also returns the conic's coefficients ``(A, B, C, D, E, F)``."""
     S = np.empty((6, 6))
@@ -414,7 +414,7 @@ def _kth(a, n, q):
     return a[q]
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _median_of_used(r, w):
     """The (lower) median of ``r`` where the weight ``w`` is positive; infinity when none is.
 
@@ -496,7 +496,7 @@ def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
     return dropped
 
 
-@njit(**JIT)
+@njit(inline="always", **JIT)
 def _robust_conic(u, v, w, peak, lim, a, res):
     """Step 5.3: the conic fitted up to ``ROUNDS`` times, dropping points three robust deviations off.
 

@@ -458,19 +458,18 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra, start, again):
                     GX[i * (n - 1) + j] = j - h + 0.5
                     GY[i * (n - 1) + j] = i - h + 0.5
         x0, y0 = ix[k] - h, iy[k] - h
+        # Unsigned indices, not row views (a view is an atomic reference count taken and dropped).
         if x0 >= 0 and y0 >= 0 and x0 + n <= W and y0 + n <= H:
             for i in range(n):
-                src = img[y0 + i, x0:x0 + n]
-                dst = P[i * n:i * n + n]
+                sy, d = np.uint64(y0 + i), np.uint64(i * n)
                 for j in range(n):
-                    dst[j] = src[j]
+                    P[d + np.uint64(j)] = img[sy, np.uint64(x0 + j)]
         else:
             # A window reaching past the image's edge: the edge replicated (as cv2.BORDER_REPLICATE pads).
             for i in range(n):
-                src = img[min(max(y0 + i, 0), H - 1)]
-                dst = P[i * n:i * n + n]
+                sy, d = np.uint64(min(max(y0 + i, 0), H - 1)), np.uint64(i * n)
                 for j in range(n):
-                    dst[j] = src[min(max(x0 + j, 0), W - 1)]
+                    P[d + np.uint64(j)] = img[sy, np.uint64(min(max(x0 + j, 0), W - 1))]
         r = max(float(r0[k]), 1.0)
         o = out[k]
         state = measure_one(h, r, noise, passes, c, S, o)
