@@ -272,3 +272,19 @@ def test_a_white_lower_lip_dot_grown_into_the_teeth_is_found_from_its_own_edge(m
     assert error() < 0.5
     monkeypatch.setattr(detector, "GROWN", 1.8)
     assert error() > 1.5
+
+
+def test_the_edge_fits_median_is_numpys():
+    """``edges._median`` (selection in a scratch row, no allocation) gives ``np.median`` to the bit."""
+    from carapost.core.blobs.edges import _median
+
+    rng = np.random.default_rng(11)
+    tmp = np.empty(64)
+    for n in (1, 2, 3, 47, 48, 49):
+        for _ in range(50):
+            a = rng.normal(size=n)
+            if rng.random() < 0.5:
+                a = np.round(a, 1)                 # ties
+            kept = a.copy()
+            assert _median(a, tmp[:n]) == np.median(a), (n, a)
+            np.testing.assert_array_equal(a, kept)  # the input is left as it was

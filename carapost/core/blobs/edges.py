@@ -415,6 +415,24 @@ def _kth(a, n, q):
 
 
 @njit(inline="always", **JIT)
+def _median(a, tmp):
+    """``np.median(a)`` (no NaN in ``a``): the middle value, or the mean of the two middle ones, by selection.
+
+    ``tmp`` (as long as ``a``) is overwritten.  numba's ``np.median`` copied ``a`` into a new array
+    at every call (an allocation, and its reference counts); the order statistics, and so the
+    answer, are the same.
+    """
+    n = len(a)
+    for i in range(n):
+        tmp[i] = a[i]
+    h = n >> 1
+    if n & 1:
+        return _kth(tmp, n, h)
+    lo = _kth(tmp, n, h - 1)
+    return (lo + _kth(tmp, n, h)) / 2
+
+
+@njit(inline="always", **JIT)
 def _median_of_used(r, w):
     """The (lower) median of ``r`` where the weight ``w`` is positive; infinity when none is.
 
@@ -528,7 +546,7 @@ def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False, flat=0):
     """
     ex, ey, peak, u, v, res, w = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
     _edge_points(img, cx, cy, a, b, th, ex, ey, peak)
-    lim = WEAK * np.median(peak)
+    lim = WEAK * _median(peak, buf[7])
     if flat == 1 and FLAT > 0.0 and b >= FLAT_MINOR:
         _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, buf[7])
     usable = 0.0
