@@ -13,6 +13,11 @@
   kernels that must do numpy's arithmetic operation for operation (their results
   are compared with numpy's to the bit; the tracker uses only these).
 
+numba's disk cache is keyed by each kernel's source file (its modification time and
+size) and signature, not by these options: after changing them, change the kernels'
+modules too (or delete their ``__pycache__``), or processes keep loading the code
+compiled with the old options.
+
 Cached kernels must not contain numpy array expressions (docs/blobs.md, "Cached
 kernels and array expressions"): write explicit loops.
 """
