@@ -67,10 +67,9 @@ def _scan(g, s, floor, border, R, rot, i0, ys, xs, v, ox, oy):
         one = np.uint64(1)
         for q in range(n):
             j = np.uint64(q + border)
-            m = R[um, j]
-            if not (m > floor and m >= R[um, j - one] and m >= R[um, j + one]):
+            m, l, r = R[um, j], R[um, j - one], R[um, j + one]
+            if not (m > floor and m >= l and m >= r):
                 continue
-            l, r = R[um, j - one], R[um, j + one]
             u, b = R[uu, j], R[ud, j]
             if (m >= R[uu, j - one] and m >= u and m >= R[uu, j + one]
                     and m >= R[ud, j - one] and m >= b and m >= R[ud, j + one]):

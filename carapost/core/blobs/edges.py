@@ -418,7 +418,7 @@ def _kth(a, n, q):
 def _median(a, tmp):
     """``np.median(a)`` (no NaN in ``a``): the middle value, or the mean of the two middle ones, by selection.
 
-    ``tmp`` (as long as ``a``) is overwritten.  numba's ``np.median`` copied ``a`` into a new array
+    ``tmp`` (as long as ``a``; it may be ``a`` itself) is overwritten.  numba's ``np.median`` copied ``a`` into a new array
     at every call (an allocation, and its reference counts); the order statistics, and so the
     answer, are the same.
     """
@@ -487,7 +487,7 @@ def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
         c, s = math.cos(j * math.pi / 4.0), math.sin(j * math.pi / 4.0)
         ux, uy = 0.35 * a * c, 0.35 * b * s
         vals[j + 1] = _level(img, cx + ca * ux - sa * uy, cy + sa * ux + ca * uy)
-    core = np.median(vals)
+    core = _median(vals, vals)
     m = 0
     for k in range(RAYS):
         ratio[k] = np.nan
