@@ -182,18 +182,40 @@ def _fall(gx, gy, x0, y0, px, py, nx, ny, t):
 
 
 @njit(**JIT)
-def _edge_points(img, cx, cy, a, b, th, ex, ey, peak):
-    """One blob's edge point and peak fall on each ray (step 5.1)."""
+def _box_side(r):
+    """Side (px) of the box of gradients the rays of an ellipse of largest semi-axis ``r`` need (:func:`_edge_points`)."""
+    return int(math.ceil(2.0 * (r + REACH + 3.0))) + 2
+
+
+@njit(**JIT)
+def _scratch(r):
+    """Scratch of :func:`_fit_edge` for ellipses of largest semi-axis up to ``r``: ``(buf, box)``.
+
+    ``buf`` is ``(10, RAYS)`` (rows 0-6 the rays' points and fits, 7-9 working rows), ``box`` the
+    gradients' box (:func:`_edge_points`).
+    """
+    n = _box_side(r)
+    return np.empty((10, RAYS)), np.empty((3, (n + 2) * (n + 2)))
+
+
+@njit(**JIT)
+def _edge_points(img, cx, cy, a, b, th, ex, ey, peak, box, fall, coarse):
+    """One blob's edge point and peak fall on each ray (step 5.1).
+
+    ``box`` is ``(3, >= (n + 2)^2)`` scratch for the gradients of the box the rays
+    cross (:func:`_box_side`), ``fall`` and ``coarse`` scratch rows (the caller's:
+    allocating them at every call cost more than filling them).
+    """
     # Samples lie within max(a, b) + REACH of the centre (the normals leave the ellipse at most that far);
     # the bicubic taps reach 2 px beyond.
     reach = max(a, b) + REACH + 3.0
     x0, y0 = int(math.floor(cx - reach)), int(math.floor(cy - reach))
-    n = int(math.ceil(2.0 * reach)) + 2
-    gx = np.empty((n, n + 2))
-    gy = np.empty((n, n + 2))
-    _sobel_box(img, x0, y0, n, n, np.empty((n + 2) * (n + 2)), gx, gy)
-    fall = np.empty(_SAMPLES)
-    coarse = np.empty(_NCOARSE)
+    n = _box_side(max(a, b))
+    if (n + 2) * (n + 2) > box.shape[1]:
+        box = np.empty((3, (n + 2) * (n + 2)))      # the caller sized it for smaller ellipses
+    gx = box[0, :n * (n + 2)].reshape((n, n + 2))
+    gy = box[1, :n * (n + 2)].reshape((n, n + 2))
+    _sobel_box(img, x0, y0, n, n, box[2], gx, gy)
     ca, sa = math.cos(th), math.sin(th)
     for k in range(RAYS):
         c, s = _COS[k], _SIN[k]
@@ -241,53 +263,62 @@ def _edge_points(img, cx, cy, a, b, th, ex, ey, peak):
 
 
 @njit(error_model="numpy", **JIT)       # a zero vector's norm divides as numpy does (nan), not raises
-def _smallest_eigenvector(S):
-    """Unit eigenvector of the smallest eigenvalue of the 6x6 scatter matrix ``S`` (inverse iteration).
+def _smallest_eigenvector(s):
+    """Unit eigenvector of the smallest eigenvalue of the 6x6 scatter matrix (inverse iteration).
 
     A conic through points on an ellipse makes that eigenvalue (the residual sum
     of squares) far below the next, so a few steps from a circle converge; a
     shift of 1e-12 of the trace keeps the Cholesky factor defined when the points
     fit exactly.  (LAPACK's eigh, three per blob, cost more than everything else.)
+    ``s`` is the matrix's upper triangle row by row (:func:`_scatter`); the
+    vector is returned as a tuple ``(A, B, C, D, E, F)``.  Written out in scalars:
+    the Cholesky factor and the iterate stay in registers (as loops over small
+    arrays they were five allocations a solve and a fifth of the from-edge
+    search's time); the operations and their order are the loops'.
     """
-    L = S.copy()
-    eps = 1e-12 * (S[0, 0] + S[1, 1] + S[2, 2] + S[3, 3] + S[4, 4] + S[5, 5]) + 1e-300
-    for j in range(6):
-        d = L[j, j] + eps
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        d = math.sqrt(max(d, 1e-300))
-        L[j, j] = d
-        for i in range(j + 1, 6):
-            t = L[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / d
-    z = np.array([1.0, 0.0, 1.0, 0.0, 0.0, -1.0])
-    y = np.empty(6)
+    (s00, s01, s02, s03, s04, s05, s11, s12, s13, s14, s15, s22, s23, s24, s25, s33, s34, s35, s44, s45,
+     s55) = s
+    eps = 1e-12 * (s00 + s11 + s22 + s33 + s44 + s55) + 1e-300
+    # Cholesky factor L (lower), column by column: L[j, j] = sqrt(S[j, j] + eps - sum_k L[j, k]^2),
+    # L[i, j] = (S[i, j] - sum_k L[i, k] L[j, k]) / L[j, j], the sums over k < j in order.
+    l00 = math.sqrt(max(s00 + eps, 1e-300))
+    l10, l20, l30, l40, l50 = s01 / l00, s02 / l00, s03 / l00, s04 / l00, s05 / l00
+    l11 = math.sqrt(max(s11 + eps - l10 * l10, 1e-300))
+    l21 = (s12 - l20 * l10) / l11
+    l31 = (s13 - l30 * l10) / l11
+    l41 = (s14 - l40 * l10) / l11
+    l51 = (s15 - l50 * l10) / l11
+    l22 = math.sqrt(max(s22 + eps - l20 * l20 - l21 * l21, 1e-300))
+    l32 = (s23 - l30 * l20 - l31 * l21) / l22
+    l42 = (s24 - l40 * l20 - l41 * l21) / l22
+    l52 = (s25 - l50 * l20 - l51 * l21) / l22
+    l33 = math.sqrt(max(s33 + eps - l30 * l30 - l31 * l31 - l32 * l32, 1e-300))
+    l43 = (s34 - l40 * l30 - l41 * l31 - l42 * l32) / l33
+    l53 = (s35 - l50 * l30 - l51 * l31 - l52 * l32) / l33
+    l44 = math.sqrt(max(s44 + eps - l40 * l40 - l41 * l41 - l42 * l42 - l43 * l43, 1e-300))
+    l54 = (s45 - l50 * l40 - l51 * l41 - l52 * l42 - l53 * l43) / l44
+    l55 = math.sqrt(max(s55 + eps - l50 * l50 - l51 * l51 - l52 * l52 - l53 * l53 - l54 * l54, 1e-300))
     # The diagonal's reciprocals once: the solves below are then chains of products, not of divisions.
-    r = np.empty(6)
-    for i in range(6):
-        r[i] = 1.0 / L[i, i]
+    r0, r1, r2, r3, r4, r5 = 1.0 / l00, 1.0 / l11, 1.0 / l22, 1.0 / l33, 1.0 / l44, 1.0 / l55
+    z0, z1, z2, z3, z4, z5 = 1.0, 0.0, 1.0, 0.0, 0.0, -1.0
     for _ in range(6):
-        for i in range(6):                      # L y = z
-            t = z[i]
-            for k in range(i):
-                t -= L[i, k] * y[k]
-            y[i] = t * r[i]
-        for i in range(5, -1, -1):              # L^T z = y
-            t = y[i]
-            for k in range(i + 1, 6):
-                t -= L[k, i] * z[k]
-            z[i] = t * r[i]
-        # Loops, not array expressions: numba names a cached array expression after an address that
-        # another cached function, compiled in another process, can share (wrong code, or a crash).
-        norm = 0.0
-        for i in range(6):
-            norm += z[i] * z[i]
-        norm = math.sqrt(norm)
-        for i in range(6):
-            z[i] /= norm
-    return z
+        # L y = z
+        y0 = z0 * r0
+        y1 = (z1 - l10 * y0) * r1
+        y2 = (z2 - l20 * y0 - l21 * y1) * r2
+        y3 = (z3 - l30 * y0 - l31 * y1 - l32 * y2) * r3
+        y4 = (z4 - l40 * y0 - l41 * y1 - l42 * y2 - l43 * y3) * r4
+        y5 = (z5 - l50 * y0 - l51 * y1 - l52 * y2 - l53 * y3 - l54 * y4) * r5
+        # L^T z = y
+        z5 = y5 * r5
+        z4 = (y4 - l54 * z5) * r4
+        z3 = (y3 - l43 * z4 - l53 * z5) * r3
+        z2 = (y2 - l32 * z3 - l42 * z4 - l52 * z5) * r2
+        z1 = (y1 - l21 * z2 - l31 * z3 - l41 * z4 - l51 * z5) * r1
+        z0 = (y0 - l10 * z1 - l20 * z2 - l30 * z3 - l40 * z4 - l50 * z5) * r0
+        norm = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2 + z3 * z3 + z4 * z4 + z5 * z5)
+        z0, z1, z2, z3, z4, z5 = z0 / norm, z1 / norm, z2 / norm, z3 / norm, z4 / norm, z5 / norm
+    return z0, z1, z2, z3, z4, z5
 
 
 @njit(inline="always", **JIT)
@@ -301,12 +332,12 @@ def _conic_fit(u, v, w, scale, res):
 
 
 @njit(**JIT_EXACT)                     # no fastmath: its sums stay in the points' order
-def _scatter(u, v, w, S):
-    """The conic fit's 6x6 scatter matrix of the points ``(u, v)`` whose weight ``w`` (0 or 1) is 1, into ``S``.
+def _scatter(u, v, w):
+    """The conic fit's 6x6 scatter matrix of the points ``(u, v)`` whose weight ``w`` (0 or 1) is 1.
 
     The sum over the points of ``m m^T``, ``m = (u^2, u v, v^2, u, v, 1)``: its upper
     triangle (the matrix is symmetric: ``m_i m_j == m_j m_i`` exactly) in 21 running
-    sums kept in registers, each in the points' order: the same sums, operation for
+    sums kept in registers and returned row by row (a tuple: no array to allocate), each in the points' order: the same sums, operation for
     operation, as accumulating into the matrix did, at a third of the time.  Inlined
     into :func:`_conic_solve` (``reassoc``), a plain loop was vectorised and its sums
     reordered (other last bits); the loop's exit on a negative weight (there is none)
@@ -341,23 +372,14 @@ def _scatter(u, v, w, S):
         s44 += m4 * m4
         s45 += m4 * 1.0
         s55 += 1.0 * 1.0
-    S[0, 0], S[0, 1], S[0, 2], S[0, 3], S[0, 4], S[0, 5] = s00, s01, s02, s03, s04, s05
-    S[1, 1], S[1, 2], S[1, 3], S[1, 4], S[1, 5] = s11, s12, s13, s14, s15
-    S[2, 2], S[2, 3], S[2, 4], S[2, 5] = s22, s23, s24, s25
-    S[3, 3], S[3, 4], S[3, 5] = s33, s34, s35
-    S[4, 4], S[4, 5] = s44, s45
-    S[5, 5] = s55
-    for i in range(6):
-        for j in range(i):
-            S[i, j] = S[j, i]
+    return (s00, s01, s02, s03, s04, s05, s11, s12, s13, s14, s15, s22, s23, s24, s25, s33, s34, s35, s44, s45,
+            s55)
 
 
 @njit(inline="always", **JIT)
 def _conic_solve(u, v, w, scale, res):
     """:func:`_conic_fit` that also returns the conic's coefficients ``(A, B, C, D, E, F)``."""
-    S = np.empty((6, 6))
-    _scatter(u, v, w, S)
-    z = _smallest_eigenvector(S)
+    z = _smallest_eigenvector(_scatter(u, v, w))
     A, B, C, D, E, F = z[0], z[1], z[2], z[3], z[4], z[5]
     det = 4.0 * A * C - B * B
     safe = det if abs(det) > 1e-12 else 1.0
@@ -433,12 +455,12 @@ def _median(a, tmp):
 
 
 @njit(inline="always", **JIT)
-def _median_of_used(r, w):
+def _median_of_used(r, w, vals):
     """The (lower) median of ``r`` where the weight ``w`` is positive; infinity when none is.
 
-    As ``np.sort`` of those values then the middle one (NaN sorted last), by selection.
+    As ``np.sort`` of those values then the middle one (NaN sorted last), by selection
+    (``vals``, as long as ``r``, is overwritten).
     """
-    vals = np.empty(len(r))
     k = 0
     nan = 0
     for i in range(len(r)):
@@ -470,7 +492,7 @@ def _level(img, px, py):
 
 
 @njit(**JIT)
-def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
+def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio, tmp):
     """Zero the peak of rays with no paint just inside their edge point (step 5.2, flat paint only).
 
     Black paint is flat: just inside a dot's edge the image is at the dot's own
@@ -479,9 +501,10 @@ def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
     steepest fall is the region's outer edge, farther out: inside that point the
     level is the region's.  A ray whose level ``INSIDE`` px in falls short of the
     dot's by ``FLAT`` of its edge's height more than the dot's usual ray is dropped.
+    ``ratio`` and ``tmp`` are scratch rows (``RAYS`` long).
     """
     ca, sa = math.cos(th), math.sin(th)
-    vals = np.empty(9)
+    vals = tmp[:9]
     vals[0] = _level(img, cx, cy)
     for j in range(8):
         c, s = math.cos(j * math.pi / 4.0), math.sin(j * math.pi / 4.0)
@@ -505,7 +528,14 @@ def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
             m += 1
     if m < MIN_RAYS * RAYS:
         return 0
-    usual = np.nanmedian(ratio)
+    # np.nanmedian: the median of the rays that have a ratio.
+    m = 0
+    for k in range(RAYS):
+        if ratio[k] == ratio[k]:
+            tmp[m] = ratio[k]
+            m += 1
+    used = tmp[:m]
+    usual = _median(used, used)
     dropped = 0
     for k in range(RAYS):
         if ratio[k] > usual + FLAT:
@@ -515,17 +545,17 @@ def _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, ratio):
 
 
 @njit(inline="always", **JIT)
-def _robust_conic(u, v, w, peak, lim, a, res):
+def _robust_conic(u, v, w, peak, lim, a, res, tmp):
     """Step 5.3: the conic fitted up to ``ROUNDS`` times, dropping points three robust deviations off.
 
-    Updates the weights ``w`` and residuals ``res``; returns ``(x0, y0, ok, spread)``.
+    Updates the weights ``w`` and residuals ``res`` (``tmp`` is a scratch row); returns ``(x0, y0, ok, spread)``.
     """
     x0 = y0 = 0.0
     ok = False
     spread = np.inf
     for _ in range(ROUNDS):
         x0, y0, ok = _conic_fit(u, v, w, a, res)
-        spread = 1.4826 * _median_of_used(res, w) + 0.02
+        spread = 1.4826 * _median_of_used(res, w, tmp) + 0.02
         same = True
         for k in range(RAYS):
             wk = 1.0 if peak[k] > lim and peak[k] > 0.0 and res[k] < 3.0 * spread else 0.0
@@ -537,7 +567,7 @@ def _robust_conic(u, v, w, peak, lim, a, res):
 
 
 @njit(**JIT)
-def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False, flat=0):
+def _fit_edge(img, cx, cy, a, b, th, buf, box, arcs=False, flat=0):
     """Steps 5.1-5.3 for one blob from the ellipse ``(cx, cy, a, b, th)``.
 
     Returns ``(dx, dy, clean, spread, n)``: the edge conic's centre less
@@ -545,10 +575,10 @@ def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False, flat=0):
     scatter (px) and how many points the last fit kept.
     """
     ex, ey, peak, u, v, res, w = buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6]
-    _edge_points(img, cx, cy, a, b, th, ex, ey, peak)
+    _edge_points(img, cx, cy, a, b, th, ex, ey, peak, box, buf[8], buf[9])
     lim = WEAK * _median(peak, buf[7])
     if flat == 1 and FLAT > 0.0 and b >= FLAT_MINOR:
-        _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, buf[7])
+        _drop_unpainted(img, cx, cy, a, b, th, ex, ey, peak, buf[7], buf[8])
     usable = 0.0
     for k in range(RAYS):
         w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 else 0.0
@@ -558,16 +588,16 @@ def _fit_edge(img, cx, cy, a, b, th, buf, arcs=False, flat=0):
         # Neither the whole edge nor any arc can keep enough rays to be clean (callers use nothing else
         # of an edge that is not): no fit.
         return 0.0, 0.0, False, np.inf, usable
-    x0, y0, ok, spread = _robust_conic(u, v, w, peak, lim, a, res)
+    x0, y0, ok, spread = _robust_conic(u, v, w, peak, lim, a, res, buf[8])
     if flat == 2 and FLAT > 0.0 and ok:
         # The flat-paint test, about the ellipse just fitted; again without the rays it drops.
         _x, _y, ok2, z = _conic_solve(u, v, w, a, res)
         fa, fb, fth = _conic_axes(z, _x, _y)
         if ok2 and fb * a >= FLAT_MINOR and _drop_unpainted(img, cx + _x * a, cy + _y * a, fa * a, fb * a, fth,
-                                                             ex, ey, peak, buf[7]) > 0:
+                                                             ex, ey, peak, buf[7], buf[8]) > 0:
             for k in range(RAYS):
                 w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 else 0.0
-            x0, y0, ok, spread = _robust_conic(u, v, w, peak, lim, a, res)
+            x0, y0, ok, spread = _robust_conic(u, v, w, peak, lim, a, res, buf[8])
     n = w.sum()
     dx, dy = x0 * a, y0 * a
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
@@ -588,7 +618,7 @@ def _fit_arcs(u, v, peak, lim, a, b, buf):
     ``INLIER`` px) wins and is fitted again to those points, twice.  Returns what
     :func:`_fit_edge` does.
     """
-    res, w = buf[5], buf[6]
+    res, w, tmp = buf[5], buf[6], buf[8]
     span = int(math.ceil(MIN_RAYS * RAYS))
     best, best_s = -1.0, 0
     for j in range(ARCS):
@@ -615,7 +645,7 @@ def _fit_arcs(u, v, peak, lim, a, b, buf):
         for k in range(RAYS):
             w[k] = 1.0 if peak[k] > lim and peak[k] > 0.0 and res[k] < INLIER else 0.0
     n = w.sum()
-    spread = 1.4826 * _median_of_used(res, w) + 0.02
+    spread = 1.4826 * _median_of_used(res, w, tmp) + 0.02
     dx, dy = x0 * a, y0 * a
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
     return dx, dy, clean, spread, n
@@ -623,11 +653,14 @@ def _fit_arcs(u, v, peak, lim, a, b, buf):
 
 @njit(**JIT)
 def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share, flat):
-    buf = np.empty((8, RAYS))
+    rmax = 1.0
+    for i in range(len(x)):
+        rmax = max(rmax, major[i] / 2.0, minor[i] / 2.0, sr[i])
+    buf, box = _scratch(rmax)
     for i in range(len(x)):
         a, b = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5)
         ox[i], oy[i], share[i] = x[i], y[i], 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, True, 1 if flat else 0)
+        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, box, True, 1 if flat else 0)
         if clean:
             # The edge points' scatter over the square root of their number: the standard error of the
             # fit's centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
@@ -640,7 +673,7 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share, flat):
             # Measured much larger than its candidate and no clean edge: the dot was measured together
             # with a darker region it touches.  Its own edge, from the candidate (inside the dot).
             r0 = max(sr[i], 1.0)
-            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, True, 2 if flat else 0)
+            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, box, True, 2 if flat else 0)
             if clean:
                 ox[i], oy[i], share[i] = sx[i] + dx, sy[i] + dy, 1.0
 
@@ -685,11 +718,14 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, fl
 
 @njit(**JIT)
 def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat):
-    buf = np.empty((8, RAYS))
+    rmax = 1.0
+    for i in range(len(sx)):
+        rmax = max(rmax, sr[i], fmaj[i] / 2.0, fmin[i] / 2.0)
+    buf, box = _scratch(rmax)
     for i in range(len(sx)):
         r0 = max(sr[i], 1.0)
         out[i, :] = 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, arcs[i] > 0.0, 2 if flat else 0)
+        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, box, arcs[i] > 0.0, 2 if flat else 0)
         if not clean:
             continue
         # The conic again on the points the last round kept, for its axes as well as its centre.
@@ -703,7 +739,7 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
         if fmaj[i] > 0.0:
             # The measured blob has a clean edge of its own: it is what the candidate led to.
             fa, fb = max(fmaj[i] / 2.0, 0.5), max(fmin[i] / 2.0, 0.5)
-            if _fit_edge(img, fx[i], fy[i], fa, fb, math.radians(fang[i]), buf, False, 1 if flat else 0)[2]:
+            if _fit_edge(img, fx[i], fy[i], fa, fb, math.radians(fang[i]), buf, box, False, 1 if flat else 0)[2]:
                 continue
         out[i, 0], out[i, 1] = sx[i] + x0 * r0, sy[i] + y0 * r0
         out[i, 2], out[i, 3], out[i, 4], out[i, 5] = 2.0 * a * r0, 2.0 * b * r0, math.degrees(th), 1.0
