@@ -25,8 +25,6 @@ from ..jit import JIT_EXACT
 
 #: Neighbours per point.
 K_NEIGHBOURS = 6
-#: Neighbours per point added because they count the point among their nearest (:func:`neighbours`).
-MUTUAL = 2
 #: Fewest measured neighbours for a prediction.
 MIN_NEIGHBOURS = 2
 #: Offset change (mm) per frame below which neighbours count as moving together: noise, and a
@@ -36,28 +34,15 @@ STEADY_MM = 0.3
 UNEVEN = 1.5
 
 
-def neighbours(X: np.ndarray, k: int = K_NEIGHBOURS, mutual: int = 0) -> np.ndarray:
-    """``(N, k + mutual)`` indices of each point's nearest other points (-1 padding).
-
-    With ``mutual``, each point also gets (nearest first, up to ``mutual`` more) the
-    points that have it among their ``k`` nearest but that it does not have: the
-    link is made both ways.  On a sparse set the lower lips' nearest six are lips,
-    mouth corners and nasolabials, while the chin counts the lower lips among its
-    own: with the link both ways a lower lip hears the chin too.
-    """
+def neighbours(X: np.ndarray, k: int = K_NEIGHBOURS) -> np.ndarray:
+    """``(N, k)`` indices of each point's nearest other points (-1 padding)."""
     n = len(X)
-    out = np.full((n, k + mutual), -1)
+    out = np.full((n, k), -1)
     if n < 2:
         return out
     kk = min(k, n - 1)
     _, idx = cKDTree(X).query(X, k=kk + 1)
     out[:, :kk] = idx[:, 1:]
-    if mutual:
-        for i in range(n):
-            back = [j for j in np.flatnonzero((idx[:, 1:] == i).any(axis=1)) if j not in idx[i, 1:]]
-            back.sort(key=lambda j: float(np.linalg.norm(X[j] - X[i])))
-            back = back[:mutual]
-            out[i, kk:kk + len(back)] = back
     return out
 
 
@@ -273,96 +258,3 @@ def _votes_median(X, available, nb, off, min_neighbours):
                     m += 1
             pred[i, d] = 0.5 * (col[(c - 1) // 2] + col[c // 2])
     return pred, use, cand, count
-
-
-#: A neighbourhood whose second singular value (of the rest-to-now cross-covariance, over its largest)
-#: is below this is too nearly a line to fix a rotation about it: the point keeps its last rotation.
-FLAT_NEIGHBOURHOOD = 0.05
-#: Fewest measured neighbours a neighbourhood's rotation is estimated from.
-ROTATION_NEIGHBOURS = 3
-#: Reweighting rounds of a neighbourhood's rotation, and the residual (mm) at which a neighbour's weight halves.
-ROTATION_REWEIGHT = 2
-ROTATION_RESIDUAL_MM = 1.0
-#: Largest change of a neighbourhood's rotation from one frame to the next (degrees): a face does
-#: not turn faster; a larger one is a wrong neighbour, and the last rotation is kept.
-ROTATION_STEP_DEG = 8.0
-
-
-def local_rotations(rest: np.ndarray, X: np.ndarray, measured: np.ndarray, nb: np.ndarray, weight: np.ndarray,
-                    last: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotation of each point's neighbourhood from its rest shape to ``X``.
-
-    The weighted least-squares rotation (Kabsch) taking the point and its measured
-    neighbours at ``rest`` to where they are in ``X``, each neighbour weighted by
-    :func:`weights` (the neighbours that move with the point: a chin point's
-    neighbourhood turns with the jaw) and the point itself by its largest
-    neighbour weight, then twice more with each neighbour's weight lowered by how
-    far that rotation leaves it (:data:`ROTATION_RESIDUAL_MM`).  Where the point is
-    not measured, too few of its neighbours are (:data:`ROTATION_NEIGHBOURS`), they lie nearly on a line
-    (:data:`FLAT_NEIGHBOURHOOD`), or the rotation would turn more than
-    :data:`ROTATION_STEP_DEG` from ``last``, ``last`` is kept.
-
-    :func:`rotated_offsets` uses it: an offset recorded frames ago, while a point
-    was still seen, is turned by its neighbour's rotation since then, so that a
-    lower lip lost with the jaw opening follows the chin's turn, not only its shift.
-    """
-    n, K = nb.shape
-    R = last.copy()
-    safe = np.maximum(nb, 0)
-    use = (nb >= 0) & measured[safe] & np.all(np.isfinite(rest[safe]), axis=2)
-    ok = measured & np.all(np.isfinite(rest), axis=1) & (use.sum(1) >= ROTATION_NEIGHBOURS)
-    if not np.any(ok):
-        return R
-    rows = np.flatnonzero(ok)
-    w = np.where(use[rows], weight[rows], 0.0)
-    w = np.concatenate([w.max(axis=1, keepdims=True), w], axis=1)             # (m, K+1), the point first
-    Q = np.concatenate([rest[rows, None], rest[safe[rows]]], axis=1)
-    Y = np.concatenate([X[rows, None], X[safe[rows]]], axis=1)
-    Q = np.where(w[..., None] > 0, Q, 0.0)
-    Y = np.where(w[..., None] > 0, Y, 0.0)
-    wc = w
-    Rm, s = _kabsch(Q, Y, wc)
-    for _ in range(ROTATION_REWEIGHT):
-        # Neighbours that did not turn with the point (an upper lip beside a chin marker) are
-        # down-weighted by how far the fitted turn leaves them, then the turn is fitted again.
-        qc, yc = _centroids(Q, Y, wc)
-        res = np.linalg.norm(np.einsum("mij,mkj->mki", Rm, Q - qc[:, None]) - (Y - yc[:, None]), axis=2)
-        wc = w / (1.0 + (res / ROTATION_RESIDUAL_MM) ** 2)
-        Rm, s = _kabsch(Q, Y, wc)
-    good = s[:, 1] > FLAT_NEIGHBOURHOOD * np.maximum(s[:, 0], 1e-300)
-    # The angle between the new and the last rotation: trace(R_new R_last^T) = 1 + 2 cos(angle).
-    cos = (np.einsum("mij,mij->m", Rm, last[rows]) - 1.0) / 2.0
-    good &= cos >= np.cos(np.radians(ROTATION_STEP_DEG))
-    R[rows[good]] = Rm[good]
-    return R
-
-
-def _centroids(Q, Y, w):
-    sw = w.sum(axis=1)
-    return np.einsum("mk,mki->mi", w, Q) / sw[:, None], np.einsum("mk,mki->mi", w, Y) / sw[:, None]
-
-
-def _kabsch(Q, Y, w):
-    """Weighted least-squares rotations taking each row's points ``Q`` (m, k, 3) to ``Y``; and their singular values."""
-    qc, yc = _centroids(Q, Y, w)
-    H = np.einsum("mk,mki,mkj->mij", w, Q - qc[:, None], Y - yc[:, None])
-    U, s, Vt = np.linalg.svd(H)
-    V = np.swapaxes(Vt, 1, 2)
-    d = np.sign(np.linalg.det(V @ np.swapaxes(U, 1, 2)))
-    V[:, :, 2] *= np.where(d == 0, 1.0, d)[:, None]
-    return V @ np.swapaxes(U, 1, 2), s
-
-
-def rotated_offsets(off: np.ndarray, nb: np.ndarray, R_now: np.ndarray, R_at: np.ndarray,
-                    fresh: np.ndarray) -> np.ndarray:
-    """The offsets ``off`` (N, K, 3) as the neighbours' rotations since they were recorded turn them.
-
-    ``R_at`` (N, K, 3, 3) is the neighbour's rotation (:func:`local_rotations`)
-    when ``off[i, k]`` was recorded and ``R_now`` (N, 3, 3) every point's now;
-    ``fresh`` (N, K) marks offsets recorded on the last frame, returned as they
-    are (their rotation since is the identity).
-    """
-    safe = np.maximum(nb, 0)
-    turn = np.einsum("nkij,nklj->nkil", R_now[safe], R_at)                    # R_now R_at^T
-    out = np.einsum("nkij,nkj->nki", turn, off)
-    return np.where(fresh[..., None] | (nb[..., None] < 0), off, out)

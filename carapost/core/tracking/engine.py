@@ -170,11 +170,6 @@ class FrameData:
         return out
 
 
-#: Experiment switch: turn stale offsets in every prediction, not only in lost points'.
-TURN_ALL = False
-MUTUAL_ALL = False
-
-
 class FrameTracker:
     """Tracks a set of face points (and the brim) from frame to frame.
 
@@ -212,24 +207,12 @@ class FrameTracker:
         self.size = np.array(size0, float)
         self.brim = np.asarray(brim, float).reshape(-1, 3)
         self.prev_frame = None
-        # Each point's nearest neighbours, then up to MUTUAL that count it among theirs.  Only the
-        # prediction of lost points hears those (_predict_lost); everything else the nearest K_NEIGHBOURS
-        # (views of the same arrays: one set of offsets, refreshed once).
-        self.nb_all = elastic.neighbours(self.X, mutual=elastic.MUTUAL)
-        self.off_all = np.full(self.nb_all.shape + (3,), np.nan)
-        self.motion = np.zeros(self.nb_all.shape + (2,))     # how each neighbour offset has changed
-        self.w_all = elastic.weights(self.motion)
-        K = elastic.K_NEIGHBOURS + (elastic.MUTUAL if MUTUAL_ALL else 0)
-        self.nb, self.off, self.w = self.nb_all[:, :K], self.off_all[:, :K], self.w_all[:, :K]
+        self.nb = elastic.neighbours(self.X)
+        self.off = np.full(self.nb.shape + (3,), np.nan)
+        self.motion = np.zeros(self.nb.shape + (2,))     # how each neighbour offset has changed
+        self.w = elastic.weights(self.motion)
         meas = np.all(np.isfinite(self.X), axis=1)
-        elastic.update_offsets(self.off_all, self.nb_all, self.X, meas)
-        # Each point's neighbourhood's rotation since the start (its rest shape: where the points first
-        # were), and each offset's neighbour's rotation when it was recorded: a stale offset is turned by
-        # the rotation since (elastic.rotated_offsets), so a lost lower lip follows the jaw's turn.
-        self.rest = self.X.copy()
-        self.R = np.tile(np.eye(3), (self.N, 1, 1))
-        self.R_at = np.tile(np.eye(3), self.nb_all.shape + (1, 1))
-        self.fresh = np.ones(self.nb_all.shape, bool)
+        elastic.update_offsets(self.off, self.nb, self.X, meas)
         self.X_last = self.X.copy()
         self.unseen = np.where(meas, 0, LAST_SEEN_FRAMES)  # frames since each point last had a position
         self.patch_run = np.zeros(self.N, int)           # frames in a row without a blob in any view
@@ -336,7 +319,7 @@ class FrameTracker:
         Xp = np.where(np.isfinite(self.V), self.X + self.V, self.X)
         lost = ~tracked
         if np.any(lost):
-            el = self._predict_lost(Xp, tracked, lost)
+            el = self._predict(Xp, tracked, lost)
             Xp[lost] = np.where(np.isfinite(el), el, self.X_last[lost])
         det = np.full((N, S), -1)
         src = np.zeros((N, S), np.uint8)
@@ -386,10 +369,7 @@ class FrameTracker:
         uv_c[~anchor] = np.nan
         taken[fd.attached(det)[2]] = True
         # 4. Pass 2: elastic prediction from the anchors, within the Max Elastic Prediction Distance.
-        el, _ = elastic.predict(Xa, anchor, self.nb, self._off(), weight=self.w)
-        if np.any(lost):
-            # A lost point's offsets are as old as its loss: turned with its neighbours, more of them.
-            el[lost] = self._predict_lost(Xa, anchor, lost)
+        el, _ = elastic.predict(Xa, anchor, self.nb, self.off, weight=self.w)
         X2 = np.where(anchor[:, None], Xa, np.where(np.isfinite(el), el, Xp))
         use_el = anchor | np.all(np.isfinite(el), axis=1)
         r2 = np.where(use_el, float(p.face_point_max_elastic_prediction_distance),
@@ -509,11 +489,8 @@ class FrameTracker:
         self.unseen = np.where(have, 0, self.unseen + 1)
         # A clamped depth is the prediction's, not a measurement: refreshing the offsets with it would
         # let a biased pair walk the point away by the clamp distance every frame.
-        firm = (status == ST_RECONSTRUCTED) & ~clamped
-        elastic.update_offsets(self.off_all, self.nb_all, X, firm, self.motion)
-        self.w_all = elastic.weights(self.motion)
-        self.w = self.w_all[:, :self.nb.shape[1]]
-        self._turn_offsets(X, firm)
+        elastic.update_offsets(self.off, self.nb, X, (status == ST_RECONSTRUCTED) & ~clamped, self.motion)
+        self.w = elastic.weights(self.motion)
         self.uv_prev = uv_raw.copy()
         blob = src == SRC_DETECTION
         self.blob_frame[blob] = frame
@@ -532,33 +509,6 @@ class FrameTracker:
                            bdet, buv_raw, bscore, berr)
 
     # --------------------------------------------------------------- sub-steps
-    def _turn_offsets(self, X, firm):
-        """Update the neighbourhoods' rotations, and which offsets were recorded on this frame (:meth:`_predict_lost`)."""
-        new = firm & ~np.all(np.isfinite(self.rest), axis=1)
-        self.rest[new] = X[new]
-        self.R = elastic.local_rotations(self.rest, X, firm, self.nb_all, self.w_all, self.R)
-        safe = np.maximum(self.nb_all, 0)
-        self.fresh = firm[:, None] & firm[safe] & (self.nb_all >= 0)
-        self.R_at[self.fresh] = self.R[safe][self.fresh]
-
-    def _off(self):
-        """The nearest neighbours' offsets the predictions of points not lost use (turned too with TURN_ALL)."""
-        if not TURN_ALL:
-            return self.off
-        K = self.nb.shape[1]
-        return elastic.rotated_offsets(self.off, self.nb, self.R, self.R_at[:, :K], self.fresh[:, :K])
-
-    def _predict_lost(self, X, available, rows):
-        """The neighbours' prediction of lost points ``rows`` (mask): every neighbour, each stale offset turned.
-
-        A point lost for frames has offsets from before its loss; turned by each
-        neighbour's rotation since (:func:`.elastic.rotated_offsets`) and heard from
-        the neighbours that count it among their nearest too (a chin for a lower lip).
-        """
-        off = elastic.rotated_offsets(self.off_all[rows], self.nb_all[rows], self.R, self.R_at[rows],
-                                      self.fresh[rows])
-        return elastic.predict(X, available, self.nb_all[rows], off, weight=self.w_all[rows])[0]
-
     def _first_two(self, Pi, Si, Dd):
         """Of :meth:`_search`'s rows (k=2): each slot's first row, its distance and the second's (inf none)."""
         if len(Pi) == 0:
@@ -573,7 +523,7 @@ class FrameTracker:
 
     def _predict(self, X, available, rows):
         """Elastic prediction of ``rows`` only (``X``, ``available``: every point)."""
-        return elastic.predict(X, available, self.nb[rows], self._off()[rows], weight=self.w[rows])[0]
+        return elastic.predict(X, available, self.nb[rows], self.off[rows], weight=self.w[rows])[0]
 
     def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det):
         p = self.p
@@ -855,7 +805,7 @@ class FrameTracker:
         """
         u, mm = depth_uncertainty(rig, X, valid & measured[:, None])
         narrow = measured & (mm > NARROW_MM_PER_PX)
-        pred, _ = elastic.predict(X, measured, self.nb, self._off(), weight=self.w)
+        pred, _ = elastic.predict(X, measured, self.nb, self.off, weight=self.w)
         clamped = np.zeros(len(X), bool)
         if not np.any(narrow):
             return X, pred, clamped
@@ -864,7 +814,7 @@ class FrameTracker:
         # neighbour with a heavy weight would otherwise drag every narrow point near it.
         dev = np.linalg.norm(X - pred, axis=1)
         firm = measured & ~narrow & ~(dev > float(self.p.max_allowed_3d_point_error))
-        firm_pred, _ = elastic.predict(X, firm, self.nb, self._off(), weight=self.w)
+        firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w)
         has_firm = np.all(np.isfinite(firm_pred), axis=1)
         pred[has_firm] = firm_pred[has_firm]
         rows = np.flatnonzero(narrow & np.all(np.isfinite(pred), axis=1))
@@ -894,8 +844,8 @@ class FrameTracker:
         """
         nb = self.nb[rows]
         safe = np.maximum(nb, 0)
-        use = (nb >= 0) & np.take_along_axis(available, safe, 1) & np.all(np.isfinite(self._off()[rows]), axis=2)
-        dev = np.abs(np.einsum("nki,ni->nk", X[safe] + self._off()[rows] - pred[:, None, :], u))
+        use = (nb >= 0) & np.take_along_axis(available, safe, 1) & np.all(np.isfinite(self.off[rows]), axis=2)
+        dev = np.abs(np.einsum("nki,ni->nk", X[safe] + self.off[rows] - pred[:, None, :], u))
         w = np.where(use, self.w[rows], 0.0)
         dev = np.where(use, dev, np.inf)
         order = np.argsort(dev, axis=1)
