@@ -164,11 +164,12 @@ def _sample(gx, gy, x0, y0, px, py):
 @njit(inline="always", **JIT)
 def _bilinear(gx, gy, x0, y0, px, py):
     """Bilinear gradient at image point ``(px, py)`` from the box gradients (for the coarse search)."""
-    ny = nx = gx.shape[0]             # the box is square (its last two columns are not used)
     ix, iy = math.floor(px), math.floor(py)
     fx, fy = px - ix, py - iy
-    c0, r0 = min(max(ix - x0, 0), nx - 1), min(max(iy - y0, 0), ny - 1)
-    c1, r1 = min(c0 + 1, nx - 1), min(r0 + 1, ny - 1)
+    # The box reaches 2 px beyond every sample (see _edge_points): the taps need no clamping, and
+    # unsigned indices need no wrap-around test.
+    c0, r0 = np.uint64(int(ix) - x0), np.uint64(int(iy) - y0)
+    c1, r1 = c0 + np.uint64(1), r0 + np.uint64(1)
     w00, w01, w10, w11 = (1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy
     return (w00 * gx[r0, c0] + w01 * gx[r0, c1] + w10 * gx[r1, c0] + w11 * gx[r1, c1],
             w00 * gy[r0, c0] + w01 * gy[r0, c1] + w10 * gy[r1, c0] + w11 * gy[r1, c1])
