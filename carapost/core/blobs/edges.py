@@ -263,6 +263,22 @@ def _edge_points(img, cx, cy, a, b, th, ex, ey, peak, box, fall, coarse):
         ex[k], ey[k], peak[k] = px + nx * t, py + ny * t, g1
 
 
+@njit(inline="always", **JIT)
+def _forward(a, m, r):
+    """``x`` with ``M x = a`` (6 unknowns, forward substitution), ``M`` lower triangular.
+
+    ``r`` holds the reciprocals of ``M``'s diagonal and ``m`` its strict lower triangle
+    row by row (``m10, m20, m21, m30, ...``); all three are tuples (kept in registers).
+    """
+    x0 = a[0] * r[0]
+    x1 = (a[1] - m[0] * x0) * r[1]
+    x2 = (a[2] - m[1] * x0 - m[2] * x1) * r[2]
+    x3 = (a[3] - m[3] * x0 - m[4] * x1 - m[5] * x2) * r[3]
+    x4 = (a[4] - m[6] * x0 - m[7] * x1 - m[8] * x2 - m[9] * x3) * r[4]
+    x5 = (a[5] - m[10] * x0 - m[11] * x1 - m[12] * x2 - m[13] * x3 - m[14] * x4) * r[5]
+    return x0, x1, x2, x3, x4, x5
+
+
 @njit(error_model="numpy", **JIT)       # a zero vector's norm divides as numpy does (nan), not raises
 def _smallest_eigenvector(s):
     """Unit eigenvector of the smallest eigenvalue of the 6x6 scatter matrix (inverse iteration).
@@ -275,7 +291,8 @@ def _smallest_eigenvector(s):
     vector is returned as a tuple ``(A, B, C, D, E, F)``.  Written out in scalars:
     the Cholesky factor and the iterate stay in registers (as loops over small
     arrays they were five allocations a solve and a fifth of the from-edge
-    search's time); the operations and their order are the loops'.
+    search's time); both triangular solves are :func:`_forward`, the second on
+    the unknowns in reverse order.
     """
     (s00, s01, s02, s03, s04, s05, s11, s12, s13, s14, s15, s22, s23, s24, s25, s33, s34, s35, s44, s45,
      s55) = s
@@ -302,21 +319,13 @@ def _smallest_eigenvector(s):
     # The diagonal's reciprocals once: the solves below are then chains of products, not of divisions.
     r0, r1, r2, r3, r4, r5 = 1.0 / l00, 1.0 / l11, 1.0 / l22, 1.0 / l33, 1.0 / l44, 1.0 / l55
     z0, z1, z2, z3, z4, z5 = 1.0, 0.0, 1.0, 0.0, 0.0, -1.0
+    lower = (l10, l20, l21, l30, l31, l32, l40, l41, l42, l43, l50, l51, l52, l53, l54)
+    # L^T is upper triangular: its solve is a lower one with the unknowns in reverse order.
+    upper = (l54, l53, l43, l52, l42, l32, l51, l41, l31, l21, l50, l40, l30, l20, l10)
+    r, rr = (r0, r1, r2, r3, r4, r5), (r5, r4, r3, r2, r1, r0)
     for _ in range(6):
-        # L y = z
-        y0 = z0 * r0
-        y1 = (z1 - l10 * y0) * r1
-        y2 = (z2 - l20 * y0 - l21 * y1) * r2
-        y3 = (z3 - l30 * y0 - l31 * y1 - l32 * y2) * r3
-        y4 = (z4 - l40 * y0 - l41 * y1 - l42 * y2 - l43 * y3) * r4
-        y5 = (z5 - l50 * y0 - l51 * y1 - l52 * y2 - l53 * y3 - l54 * y4) * r5
-        # L^T z = y
-        z5 = y5 * r5
-        z4 = (y4 - l54 * z5) * r4
-        z3 = (y3 - l43 * z4 - l53 * z5) * r3
-        z2 = (y2 - l32 * z3 - l42 * z4 - l52 * z5) * r2
-        z1 = (y1 - l21 * z2 - l31 * z3 - l41 * z4 - l51 * z5) * r1
-        z0 = (y0 - l10 * z1 - l20 * z2 - l30 * z3 - l40 * z4 - l50 * z5) * r0
+        y = _forward((z0, z1, z2, z3, z4, z5), lower, r)                         # L y = z
+        z5, z4, z3, z2, z1, z0 = _forward((y[5], y[4], y[3], y[2], y[1], y[0]), upper, rr)   # L^T z = y
         norm = math.sqrt(z0 * z0 + z1 * z1 + z2 * z2 + z3 * z3 + z4 * z4 + z5 * z5)
         z0, z1, z2, z3, z4, z5 = z0 / norm, z1 / norm, z2 / norm, z3 / norm, z4 / norm, z5 / norm
     return z0, z1, z2, z3, z4, z5
