@@ -184,7 +184,10 @@ def _fall(gx, gy, x0, y0, px, py, nx, ny, t):
 
 @njit(**JIT)
 def _box_side(r):
-    """Side (px) of the box of gradients the rays of an ellipse of largest semi-axis ``r`` need (:func:`_edge_points`)."""
+    """Side (px) of the box of gradients that the rays of an ellipse of largest semi-axis ``r`` cross.
+
+    (:func:`_edge_points`: the samples and their bicubic taps.)
+    """
     return int(math.ceil(2.0 * (r + REACH + 3.0))) + 2
 
 
@@ -347,8 +350,9 @@ def _scatter(u, v, w):
 
     The sum over the points of ``m m^T``, ``m = (u^2, u v, v^2, u, v, 1)``: its upper
     triangle (the matrix is symmetric: ``m_i m_j == m_j m_i`` exactly) in 21 running
-    sums kept in registers and returned row by row (a tuple: no array to allocate), each in the points' order: the same sums, operation for
-    operation, as accumulating into the matrix did, at a third of the time.  Inlined
+    sums kept in registers and returned row by row as a tuple (no array to allocate),
+    each in the points' order: the same sums, operation for operation, as
+    accumulating into the matrix did, at a third of the time.  Inlined
     into :func:`_conic_solve` (``reassoc``), a plain loop was vectorised and its sums
     reordered (other last bits); the loop's exit on a negative weight (there is none)
     keeps it a scalar loop.
@@ -670,7 +674,8 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share, flat):
     for i in range(len(x)):
         a, b = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5)
         ox[i], oy[i], share[i] = x[i], y[i], 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, box, True, 1 if flat else 0)
+        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, box, True,
+                                             1 if flat else 0)
         if clean:
             # The edge points' scatter over the square root of their number: the standard error of the
             # fit's centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
