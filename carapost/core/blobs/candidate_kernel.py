@@ -120,7 +120,8 @@ def dog_peaks(g, s, floor, border):
         if i >= H - border:
             break
         cap *= 2
-        ys, xs, v, ox, oy = _grow(ys[:k], cap), _grow(xs[:k], cap), _grow(v[:k], cap), _grow(ox[:k], cap), _grow(oy[:k], cap)
+        ys, xs, v = _grow(ys[:k], cap), _grow(xs[:k], cap), _grow(v[:k], cap)
+        ox, oy = _grow(ox[:k], cap), _grow(oy[:k], cap)
     return ys[:k].copy(), xs[:k].copy(), v[:k].copy(), ox[:k].copy(), oy[:k].copy()
 
 

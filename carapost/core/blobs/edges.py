@@ -454,8 +454,8 @@ def _kth(a, n, q):
 def _median(a, tmp):
     """``np.median(a)`` (no NaN in ``a``): the middle value, or the mean of the two middle ones, by selection.
 
-    ``tmp`` (as long as ``a``; it may be ``a`` itself) is overwritten.  numba's ``np.median`` copied ``a`` into a new array
-    at every call (an allocation, and its reference counts); the order statistics, and so the
+    ``tmp`` (as long as ``a``; it may be ``a`` itself) is overwritten.  numba's ``np.median`` copied ``a`` into a
+    new array at every call (an allocation, and its reference counts); the order statistics, and so the
     answer, are the same.
     """
     n = len(a)
