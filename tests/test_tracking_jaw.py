@@ -174,7 +174,7 @@ def test_a_close_pair_is_trusted_where_its_neighbours_disagree_about_its_depth(q
     valid = pair_only(X, m)
     u = pair_direction(rig, X, valid, m)
     # Stale offsets: each vote lands this far along the viewing direction from the marker.
-    T.off[m] += np.array([0.0, 4.0, 8.0, -1.0, 12.0, -3.0])[:, None] * u
+    T.off[m] += np.array([0.0, 4.0, 8.0, -1.0, 12.0, -3.0, 6.0, 2.0])[:T.off.shape[1], None] * u
     Xo, pred, _ = T._steady_depth(rig, X.copy(), valid, np.ones(len(X), bool))
     assert np.linalg.norm(pred[m] - X[m]) > 1.5      # the premise: a prediction off by more than the clamp
     assert np.linalg.norm(Xo[m] - X[m]) < 0.05
@@ -190,7 +190,7 @@ def test_votes_that_agree_still_hold_a_biased_pair(quiet):
     u = pair_direction(rig, X, valid, m)
     truth = X[m].copy()
     X[m] += 4.0 * u
-    T.off[m] += np.array([0.0, 0.1, -0.1, 0.2, -0.2, 0.0])[:, None] * u
+    T.off[m] += np.array([0.0, 0.1, -0.1, 0.2, -0.2, 0.0, 0.1, -0.1])[:T.off.shape[1], None] * u
     Xo, _, clamped = T._steady_depth(rig, X, valid, np.ones(len(X), bool))
     assert clamped[m]
     assert np.linalg.norm(Xo[m] - truth) < NARROW_DEPTH_MM + 0.25

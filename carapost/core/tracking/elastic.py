@@ -25,6 +25,8 @@ from ..jit import JIT_EXACT
 
 #: Neighbours per point.
 K_NEIGHBOURS = 6
+#: Neighbours per point added because they count the point among their nearest (:func:`neighbours`).
+MUTUAL = 2
 #: Fewest measured neighbours for a prediction.
 MIN_NEIGHBOURS = 2
 #: Offset change (mm) per frame below which neighbours count as moving together: noise, and a
@@ -34,15 +36,46 @@ STEADY_MM = 0.3
 UNEVEN = 1.5
 
 
-def neighbours(X: np.ndarray, k: int = K_NEIGHBOURS) -> np.ndarray:
-    """``(N, k)`` indices of each point's nearest other points (-1 padding)."""
+def neighbours(X: np.ndarray, k: int = K_NEIGHBOURS, mutual: int = 0) -> np.ndarray:
+    """``(N, k + mutual)`` indices of each point's nearest other points (-1 padding).
+
+    With ``mutual``, each point also gets, nearest first, up to ``mutual`` of the
+    points that count it among their ``k`` nearest but that it does not count
+    among its own: the link is made both ways.  On a sparse set a lower lip's
+    nearest six are lips, mouth corners and nasolabials while the chin counts
+    the lower lip among its own; with the link both ways the lower lip hears the
+    chin too, and a jaw marker the cheek beside it.
+    """
     n = len(X)
-    out = np.full((n, k), -1)
+    out = np.full((n, k + mutual), -1)
     if n < 2:
         return out
     kk = min(k, n - 1)
     _, idx = cKDTree(X).query(X, k=kk + 1)
     out[:, :kk] = idx[:, 1:]
+    if mutual:
+        near = np.zeros((n, n), bool)
+        near[np.repeat(np.arange(n), kk), idx[:, 1:].ravel()] = True
+        back = near.T & ~near                    # back[i, j]: j counts i among its nearest, not i j
+        dist = np.where(back, np.linalg.norm(X[:, None] - X[None], axis=2), np.inf)
+        order = np.argsort(dist, axis=1, kind="stable")[:, :mutual]
+        ok = np.isfinite(np.take_along_axis(dist, order, 1))
+        out[:, kk:kk + order.shape[1]] = np.where(ok, order, -1)
+    return out
+
+
+def spacing(X: np.ndarray, k: int = K_NEIGHBOURS) -> np.ndarray:
+    """(N,) each point's mean distance (mm) to its ``k`` nearest others; points without a position get the median."""
+    n = len(X)
+    have = np.all(np.isfinite(X), axis=1)
+    out = np.full(n, np.nan)
+    if np.count_nonzero(have) >= 2:
+        kk = min(k, int(np.count_nonzero(have)) - 1)
+        d, _ = cKDTree(X[have]).query(X[have], k=kk + 1)
+        out[have] = d[:, 1:].mean(axis=1)
+        out[~have] = np.median(out[have])
+    else:
+        out[:] = 20.0                                    # a face's typical spacing; nothing to measure it from
     return out
 
 

@@ -16,7 +16,8 @@ from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCT
 from . import elastic, patch, reacquire, vote
 from .nearest import SortedSweep
 from .assign import candidates, mutual_best, size_changed
-from .geometry import RigState, depth_uncertainty, held_out_errors, refine_poses, reprojection, triangulate
+from .geometry import (RigState, depth_uncertainty, held_out_errors, information, refine_poses, reprojection,
+                       triangulate)
 from .params import TrackingParams
 
 #: Pass 1 accepts a match when the next candidate is this many times farther (ratio test).
@@ -88,9 +89,25 @@ def held_out_limit(errors: np.ndarray, max_error: float) -> float:
     return float(min(max_error, max(HELD_OUT_FLOOR_PX, HELD_OUT_SIGMAS * sigma)))
 
 
-def confidence(src: np.ndarray) -> np.ndarray:
-    """Triangulation weight of each view of ``src`` (N, S): 1 for a blob, ``PATCH_WEIGHT`` for a patch."""
-    return np.where(src == SRC_PATCH, PATCH_WEIGHT, 1.0)
+#: How a blob's expected centre error grows as the classifier's score falls short of 1: by this many times
+#: its error at a score of 0.999 for each decade of ``1 - score`` above 0.001 (rendered takes, black and
+#: white: 0.08-0.12 px RMS at 0.999 and above, 0.16-0.21 at 0.995-0.999, 0.21-0.26 at 0.98-0.995,
+#: 0.3-0.45 at 0.8-0.98: a low score is a dot seen at a grazing angle, half hidden or beside a shadow).
+SCORE_ERROR_SLOPE = 1.8
+
+
+def blob_weight(prob: np.ndarray) -> np.ndarray:
+    """Triangulation weight of blob views of classifier score ``prob``: 1 at 0.999 and above (NaN: 1)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        decades = np.clip(3.0 + np.log10(np.clip(1.0 - prob, 1e-6, 1.0)), 0.0, 3.0)
+    return np.where(np.isfinite(decades), 1.0 / (1.0 + SCORE_ERROR_SLOPE * decades), 1.0)
+
+
+def confidence(src: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
+    """Triangulation weight of each view of ``src`` (N, S): :func:`blob_weight` of its detection's
+    score ``prob`` (N, S) for a blob (1 without), ``PATCH_WEIGHT`` for a patch."""
+    blob = 1.0 if prob is None else blob_weight(prob)
+    return np.where(src == SRC_PATCH, PATCH_WEIGHT, blob)
 
 
 def on_ray(rig: RigState, uv_c: np.ndarray, views: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -122,6 +139,19 @@ class FrameResult:
     brim_uv: np.ndarray      #: (B, S, 2) raw px
     brim_score: np.ndarray   #: (B, S)
     brim_err: np.ndarray     #: (B, S) px
+    #: (N,) points whose sample on the frame before this one was a return from a loss on two views that this
+    #: frame did not confirm (:attr:`FrameTracker.tentative`): the caller takes that sample back.
+    retract: np.ndarray | None = None
+
+    def take_back(self, rows: np.ndarray) -> None:
+        """Clear the face samples of ``rows`` (N,) bool on this frame (a return that was not confirmed)."""
+        self.X[rows] = np.nan
+        self.status[rows] = ST_NONE
+        self.residual[rows] = np.nan
+        self.src[rows] = SRC_NONE
+        self.det[rows] = -1
+        self.uv[rows] = np.nan
+        self.score[rows] = np.nan
 
 
 class FrameData:
@@ -145,6 +175,7 @@ class FrameData:
         self.sensor = np.repeat(np.arange(len(recs)), [len(r) for r in recs])
         self.local = np.arange(G) - self.offsets[self.sensor]
         self.size_all = np.concatenate(self.size) if G else np.zeros((0, 2))
+        self.prob_all = (np.concatenate([r["score"] for r in recs]).astype(float) if G else np.zeros(0))
         self.xy_all = np.concatenate(self.xy) if G else np.zeros((0, 2))
         self.raw_all = np.concatenate(self.raw) if G else np.zeros((0, 2))
         self.free = np.ones(G, bool)
@@ -168,6 +199,59 @@ class FrameData:
         out = uv.copy()
         out[:, 0] += sensors * self.SENSOR_GAP
         return out
+
+
+#: Image error (px) of a blob centre of top score (weight 1 in :func:`confidence`), and error (mm) of the
+#: neighbours' prediction per mm of a point's mean distance to its nearest neighbours: the weights
+#: :func:`fuse_depth` gives the two.  Chosen on the rendered takes (session 13; docs/tracking.md): the
+#: blobs of score 0.999 and above land 0.08-0.12 px from their dots; a smaller DEPTH_PX (a weaker pull
+#: towards the prediction) left more of the close pairs' depth error, a larger one let the prediction,
+#: whose offsets are refreshed from the averaged points, hold the points too firmly (0.3 px: RMS 0.13 mm).
+DEPTH_PX = 0.08
+PRED_MM_PER_MM = 0.025
+#: A measurement farther than this many standard deviations (per axis) from the prediction is not averaged
+#: with it: a wrong or biased blob, for the clamp and Remove Bad 3D Points to judge.
+FUSE_GATE = 3.0
+
+
+def fuse_depth(X: np.ndarray, info: np.ndarray, pred: np.ndarray, pred_sd, rows: np.ndarray) -> np.ndarray:
+    """``X`` with each of ``rows`` averaged with the neighbours' prediction, each weighted by its certainty.
+
+    The measured point is certain to ``info / DEPTH_PX²`` (:func:`.geometry.information`):
+    across the rays, to a fraction of a millimetre; along them, for two close cameras,
+    to millimetres.  The prediction is certain to ``pred_sd`` mm in every direction.  The
+    weighted mean moves a point mostly along its poorly seen depth and hardly across
+    it.  Where the two disagree by more than :data:`FUSE_GATE` standard deviations the
+    point is left as measured.
+
+    Parameters
+    ----------
+    X, pred : ndarray (N, 3)
+    info : ndarray (N, 3, 3)
+        Information of each point's views per px² of image error.
+    pred_sd : float or ndarray (N,)
+        Standard deviation (mm) of each prediction.
+    rows : ndarray (N,) bool
+        Points to average (measured, by two or more views).
+    """
+    ok = rows & np.all(np.isfinite(pred), axis=1) & np.all(np.isfinite(info), axis=(1, 2))
+    if not np.any(ok):
+        return X
+    Jm = info[ok] / DEPTH_PX ** 2
+    vp = np.broadcast_to(np.asarray(pred_sd, float) ** 2, (len(X),))[ok]
+    Jp = np.eye(3)[None] / vp[:, None, None]
+    dx = X[ok] - pred[ok]
+    # The disagreement's Mahalanobis distance under both covariances, (Cm + Cp)^-1 = Jm - Jm (Jm + Jp)^-1 Jm
+    # (Woodbury): Jm + Jp is always invertible, Jm alone not for two rays that are nearly parallel.
+    Jdx = np.einsum("nij,nj->ni", Jm, dx)
+    both = Jm + Jp
+    md2 = np.einsum("ni,ni->n", dx, Jdx) - np.einsum("ni,ni->n", Jdx, np.linalg.solve(both, Jdx[..., None])[..., 0])
+    inside = md2 <= 3.0 * FUSE_GATE ** 2
+    # X + (Jm + Jp)^-1 Jp (pred - X): the information-weighted mean.
+    step = np.linalg.solve(both, np.einsum("nij,nj->ni", Jp, -dx)[..., None])[..., 0]
+    out = X.copy()
+    out[np.flatnonzero(ok)[inside]] += step[inside]
+    return out
 
 
 class FrameTracker:
@@ -207,7 +291,7 @@ class FrameTracker:
         self.size = np.array(size0, float)
         self.brim = np.asarray(brim, float).reshape(-1, 3)
         self.prev_frame = None
-        self.nb = elastic.neighbours(self.X)
+        self.nb = elastic.neighbours(self.X, mutual=elastic.MUTUAL)
         self.off = np.full(self.nb.shape + (3,), np.nan)
         self.motion = np.zeros(self.nb.shape + (2,))     # how each neighbour offset has changed
         self.w = elastic.weights(self.motion)
@@ -216,6 +300,11 @@ class FrameTracker:
         self.X_last = self.X.copy()
         self.unseen = np.where(meas, 0, LAST_SEEN_FRAMES)  # frames since each point last had a position
         self.patch_run = np.zeros(self.N, int)           # frames in a row without a blob in any view
+        # Points back from a loss on two views on the last frame: kept only if this frame finds them too.
+        self.tentative = np.zeros(self.N, bool)
+        self._prob = np.full((self.N, self.S), np.nan)    # this frame's views' classifier scores (blobs)
+        # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
+        self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
         # Each view's last blob sample (frame, raw px): patches are matched against the marker's
         # look there, not against the previous frame's patch, so that they cannot drift step by step.
         blob0 = np.all(np.isfinite(self.size), axis=2) & np.all(np.isfinite(self.uv_prev), axis=2)
@@ -411,6 +500,8 @@ class FrameTracker:
         r, s, g = fd.attached(det)
         uv_c[r, s] = fd.xy_all[g]
         uv_raw[r, s] = fd.raw_all[g]
+        self._prob = np.full((N, S), np.nan)
+        self._prob[r, s] = fd.prob_all[g]
         # 5. Patch tracking where no blob matched.
         if self.images is not None and self.prev_frame is not None:
             self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det)
@@ -438,10 +529,10 @@ class FrameTracker:
             uvall = np.concatenate([buv_c, uv_c[multi]])
             vall = np.concatenate([bdet >= 0, valid[multi]])
             rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
-            X = triangulate(rig, uv_c, valid, confidence(src))
+            X = triangulate(rig, uv_c, valid, confidence(src, self._prob))
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
-        X, pred, clamped = self._steady_depth(rig, X, valid, measured)
+        X, pred, clamped = self._steady_depth(rig, X, valid, measured, confidence(src, self._prob))
         X = self._patch_depth(rig, X, uv_c, src, measured, motion)
         if p.remove_bad_3d_points and np.any(measured):
             # Three or more agreeing blob views outweigh a prediction: a jaw speeding up from 3.6 to 9 mm a
@@ -481,6 +572,13 @@ class FrameTracker:
         residual = np.sqrt(np.where(valid, err, 0.0) ** 2 @ np.ones(S) / np.maximum(nv, 1))
         residual = np.where(nv > 0, residual, np.nan)
         X[nothing] = np.nan
+        # A return from a loss on two views is the weakest evidence there is: a wide pair meets wherever one
+        # blob lies near the other's epipolar line, and a lower lip lost with the jaw open came back on two
+        # stray blobs 10 px off its dot, 3.5 mm off.  Such a return stands once the next frame measures the
+        # point again from two views or more (one view on the ray near the return confirms nothing); until
+        # then its offsets are not refreshed from it.
+        retract = self.tentative & (status != ST_RECONSTRUCTED)
+        tentative = lost & (status == ST_RECONSTRUCTED) & (valid.sum(1) == 2)
         # 9. Carry the state to the next frame.
         have = ~nothing
         self.V = np.where(have[:, None] & tracked[:, None], X - self.X, np.nan)
@@ -489,7 +587,9 @@ class FrameTracker:
         self.unseen = np.where(have, 0, self.unseen + 1)
         # A clamped depth is the prediction's, not a measurement: refreshing the offsets with it would
         # let a biased pair walk the point away by the clamp distance every frame.
-        elastic.update_offsets(self.off, self.nb, X, (status == ST_RECONSTRUCTED) & ~clamped, self.motion)
+        elastic.update_offsets(self.off, self.nb, X, (status == ST_RECONSTRUCTED) & ~clamped & ~tentative,
+                               self.motion)
+        self.tentative = tentative
         self.w = elastic.weights(self.motion)
         self.uv_prev = uv_raw.copy()
         blob = src == SRC_DETECTION
@@ -506,7 +606,7 @@ class FrameTracker:
         bscore[r, s] = 1.0
         berr = reprojection(rig, self.brim, buv_c, bdet >= 0)
         return FrameResult(frame, rig.R.copy(), rig.C.copy(), X, status, residual, src, det, uv_raw, score,
-                           bdet, buv_raw, bscore, berr)
+                           bdet, buv_raw, bscore, berr, retract if np.any(retract) else None)
 
     # --------------------------------------------------------------- sub-steps
     def _first_two(self, Pi, Si, Dd):
@@ -592,7 +692,7 @@ class FrameTracker:
         held-out limit.  The held-out test runs again on a point that still has 3+ views after losing
         one, as long as each further drop brings it nearer that prediction.
         """
-        X = triangulate(rig, uv_c, valid, confidence(src))
+        X = triangulate(rig, uv_c, valid, confidence(src, self._prob))
         err = reprojection(rig, X, uv_c, valid)
         if not self.p.remove_bad_2d_projections:
             return X, err
@@ -606,7 +706,7 @@ class FrameTracker:
             valid[bad, s] = False
             src[bad, s] = SRC_NONE
             uv_c[bad, s] = np.nan
-            X[bad] = triangulate(rig, uv_c[bad], valid[bad], confidence(src[bad]))
+            X[bad] = triangulate(rig, uv_c[bad], valid[bad], confidence(src[bad], self._prob[bad]))
             err[bad] = reprojection(rig, X[bad], uv_c[bad], valid[bad])
         # A wrong view of a 3+-view point shares its error with the others; held out, it shows in full.
         rows = np.flatnonzero(valid.sum(1) >= 3)
@@ -654,7 +754,7 @@ class FrameTracker:
             valid[b, s] = False
             src[b, s] = SRC_NONE
             uv_c[b, s] = np.nan
-            X[b] = triangulate(rig, uv_c[b], valid[b], confidence(src[b]))
+            X[b] = triangulate(rig, uv_c[b], valid[b], confidence(src[b], self._prob[b]))
             err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
             # A point may hold two wrong views (a drifting patch and another marker's blob): the views
             # left are judged again, against the same limit (the frame's spread of good views).
@@ -750,7 +850,7 @@ class FrameTracker:
         uv_c[b, s] = np.nan
         r = np.unique(b)
         v = src[r] != SRC_NONE
-        X[r] = triangulate(rig, uv_c[r], v, confidence(src[r]))
+        X[r] = triangulate(rig, uv_c[r], v, confidence(src[r], self._prob[r]))
         err[r] = reprojection(rig, X[r], uv_c[r], v)
 
     def _patch_depth(self, rig, X, uv_c, src, measured, motion):
@@ -779,7 +879,7 @@ class FrameTracker:
         X[rows] = on_ray(rig, uv_c[rows], blob[rows], pred)[0]
         return X
 
-    def _steady_depth(self, rig, X, valid, measured):
+    def _steady_depth(self, rig, X, valid, measured, weight=None):
         """Bound the depth of points seen only by close cameras by their firm neighbours' prediction.
 
         A narrow pair's depth is off by mm per pixel of detection error, which its
@@ -801,37 +901,57 @@ class FrameTracker:
             The neighbours' prediction of every point (from the firm points where
             they suffice, else from all ``measured``).
         clamped : ndarray (N,) bool
-            Points whose depth was moved.
+            Points whose measured depth was beyond the bound (their offsets are not refreshed).
+
+        Every measured point's position is first averaged with the prediction, each weighted by
+        its certainty (:func:`fuse_depth`); the bound applies to the average.
         """
         u, mm = depth_uncertainty(rig, X, valid & measured[:, None])
         narrow = measured & (mm > NARROW_MM_PER_PX)
         pred, _ = elastic.predict(X, measured, self.nb, self.off, weight=self.w)
         clamped = np.zeros(len(X), bool)
-        if not np.any(narrow):
-            return X, pred, clamped
-        # Firm: seen from both sides and where its own neighbours put it.  A wide pair can triangulate
-        # a wrong correspondence consistently (Remove Bad 3D Points drops it later), and one such
-        # neighbour with a heavy weight would otherwise drag every narrow point near it.
-        dev = np.linalg.norm(X - pred, axis=1)
-        firm = measured & ~narrow & ~(dev > float(self.p.max_allowed_3d_point_error))
-        firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w)
-        has_firm = np.all(np.isfinite(firm_pred), axis=1)
-        pred[has_firm] = firm_pred[has_firm]
+        has_firm = np.zeros(len(X), bool)
+        firm = measured
+        if np.any(narrow):
+            # Firm: seen from both sides and where its own neighbours put it.  A wide pair can triangulate
+            # a wrong correspondence consistently (Remove Bad 3D Points drops it later), and one such
+            # neighbour with a heavy weight would otherwise drag every narrow point near it.
+            dev = np.linalg.norm(X - pred, axis=1)
+            firm = measured & ~narrow & ~(dev > float(self.p.max_allowed_3d_point_error))
+            firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w)
+            has_firm = np.all(np.isfinite(firm_pred), axis=1)
+            pred[has_firm] = firm_pred[has_firm]
+        # How far each prediction can be off: the face's deformation over its neighbours' distance, or, where
+        # they disagree about the depth (a jaw point between the still cheek and the moving chin), their spread.
+        rows = np.flatnonzero(measured & np.all(np.isfinite(pred), axis=1))
+        spread = np.zeros(len(X))
+        if len(rows):
+            voters = np.where(has_firm[rows, None], firm[None], measured[None])
+            spread[rows] = self._vote_spread(X, voters, rows, pred[rows], u[rows])
+        Xm = X
+        X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred,
+                       np.maximum(self.pred_sd, spread), measured)
         rows = np.flatnonzero(narrow & np.all(np.isfinite(pred), axis=1))
         if len(rows) == 0:
             return X, pred, clamped
         along = np.einsum("ni,ni->n", X[rows] - pred[rows], u[rows])
-        voters = np.where(has_firm[rows, None], firm[None], measured[None])
-        bound = np.maximum(NARROW_DEPTH_MM, self._vote_spread(X, voters, rows, pred[rows], u[rows]))
+        measured_along = np.einsum("ni,ni->n", Xm[rows] - pred[rows], u[rows])
+        bound = np.maximum(NARROW_DEPTH_MM, spread[rows])
         excess = along - np.clip(along, -bound, bound)
+        # Held: the measured depth itself beyond the bound.  Its offsets are not refreshed even where the
+        # average with the prediction came within the bound: a pair biased frame after frame would
+        # otherwise walk the prediction after it, a fraction of the bias a frame.
+        held = np.abs(measured_along) > bound
         if self.p.remove_bad_3d_points:
             # Farther than any grazing bias: a wrong blob, not a biased one.  Moved to the bound it
             # would pass as a point millimetres off; left where it is, Remove Bad 3D Points drops it.
             lim = NARROW_MISMATCH * float(self.p.max_allowed_3d_point_error)
-            excess = np.where(np.abs(along) > np.maximum(bound, lim), 0.0, excess)
+            mismatch = np.abs(measured_along) > np.maximum(bound, lim)
+            excess = np.where(mismatch, 0.0, excess)
+            held &= ~mismatch
         X = X.copy()
         X[rows] -= excess[:, None] * u[rows]
-        clamped[rows] = excess != 0
+        clamped[rows] = held
         return X, pred, clamped
 
     def _vote_spread(self, X, available, rows, pred, u):
@@ -874,7 +994,7 @@ class FrameTracker:
                 for s in views:
                     v = valid[i].copy()
                     v[s] = False
-                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], confidence(src[i:i + 1]))[0]
+                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], confidence(src[i:i + 1], self._prob[i:i + 1]))[0]
                     e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
                     d = np.linalg.norm(Xi - pred[i])
                     if d <= lim[i] and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:

@@ -274,3 +274,23 @@ def depth_uncertainty(rig: RigState, X: np.ndarray, valid: np.ndarray) -> tuple[
         u = np.nansum(d, axis=1)
         u /= np.linalg.norm(u, axis=1, keepdims=True)
     return u, mm
+
+
+def information(rig: RigState, X: np.ndarray, valid: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3, 3) how well each point's views fix it: the inverse of its position's covariance, per px².
+
+    Each view adds ``(f / d)² (I - r rᵀ)``, ``r`` the unit ray from the camera to the point,
+    ``d`` its length and ``f`` the focal length in px: a pixel of image error moves the point
+    ``d / f`` mm across the ray and nothing along it.  Two close cameras leave the depth
+    loose; cameras on both sides fix it.  ``weight`` (N, S): each view's confidence as in
+    :func:`triangulate` (its information scales with the square).
+    """
+    d = X[:, None, :] - rig.C[None]                                   # (N, S, 3)
+    dist2 = np.einsum("nsi,nsi->ns", d, d)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = np.where(valid, rig.K[None, :, 0, 0] ** 2 / dist2, 0.0)
+        if weight is not None:
+            g = g * weight ** 2
+        r = np.where(valid[..., None], d / np.sqrt(dist2)[..., None], 0.0)
+    return np.einsum("ns,ij->nij", g, np.eye(3)) - np.einsum("ns,nsi,nsj->nij", g, r, r)
+
