@@ -239,16 +239,16 @@ def fuse_depth(X: np.ndarray, info: np.ndarray, pred: np.ndarray, pred_sd, rows:
         return X
     Jm = info[ok] / DEPTH_PX ** 2
     vp = np.broadcast_to(np.asarray(pred_sd, float) ** 2, (len(X),))[ok]
-    Jp = np.eye(3)[None] / vp[:, None, None]
     dx = X[ok] - pred[ok]
     # The disagreement's Mahalanobis distance under both covariances, (Cm + Cp)^-1 = Jm - Jm (Jm + Jp)^-1 Jm
-    # (Woodbury): Jm + Jp is always invertible, Jm alone not for two rays that are nearly parallel.
+    # (Woodbury): Jm + Jp is always invertible, Jm alone not for two rays that are nearly parallel.  The
+    # information-weighted mean is X + (Jm + Jp)^-1 Jp (pred - X), Jp = I / vp: one solve serves both.
     Jdx = np.einsum("nij,nj->ni", Jm, dx)
-    both = Jm + Jp
-    md2 = np.einsum("ni,ni->n", dx, Jdx) - np.einsum("ni,ni->n", Jdx, np.linalg.solve(both, Jdx[..., None])[..., 0])
+    both = Jm + np.eye(3)[None] / vp[:, None, None]
+    sol = np.linalg.solve(both, np.stack([Jdx, -dx / vp[:, None]], axis=-1))
+    md2 = np.einsum("ni,ni->n", dx, Jdx) - np.einsum("ni,ni->n", Jdx, sol[..., 0])
     inside = md2 <= 3.0 * FUSE_GATE ** 2
-    # X + (Jm + Jp)^-1 Jp (pred - X): the information-weighted mean.
-    step = np.linalg.solve(both, np.einsum("nij,nj->ni", Jp, -dx)[..., None])[..., 0]
+    step = sol[..., 1]
     out = X.copy()
     out[np.flatnonzero(ok)[inside]] += step[inside]
     return out
