@@ -12,17 +12,12 @@ import pytest
 
 from carapost.core.points import ST_NONE, ST_SINGLE
 from carapost.core.tracking import track
-from carapost.core.tracking.synthetic_take import initialise, make_take
 from support import remove_marker_detection
 
-QUIET = dict(jaw_mm=0.0, blinks=0, occlusion_rate=0.0, hidden_markers=0, slips=0)
+import test_tracking
 
-
-@pytest.fixture(scope="module")
-def quiet():
-    sc = make_take(35, 20, seed=4, **QUIET)
-    initialise(sc, 0)
-    return sc
+#: 35 markers of slow head motion, initialised on frame 0.
+quiet = test_tracking.quiet
 
 
 def hide(sc, m, frames, keep=()):
@@ -59,3 +54,23 @@ def test_a_return_on_two_views_needs_the_next_frame(quiet, views_back, views_nex
     if not kept:
         assert p.det[8].max() == -1 and np.all(np.isnan(p.pos[8]))
     assert p.status[13] != ST_NONE                                 # picked up again when the marker is back
+
+
+def test_a_live_display_gets_the_frame_of_a_return_taken_back_again(quiet):
+    """Update Timeline shows each frame as it is tracked: a sample taken back is shown cleared."""
+    from carapost.core.progress import Progress
+    from carapost.core.tracking.evaluate import identify
+
+    sc = copy.deepcopy(quiet)
+    m = 5
+    hide(sc, m, range(4, 13), {8: (1, 3)})
+    pid = next(p for p, mm in identify(sc, 0).items() if mm == m)
+    shown = []
+    prog = Progress()
+    prog.listen(lambda f, payload: shown.append((f, payload)))
+    track(sc.project, 0, 1, progress=prog)
+    eights = [payload for f, payload in shown if f == 8]
+    assert len(eights) == 2                                        # as tracked, then as taken back
+    row = [list(payload["ids"]).index(pid) for payload in eights]
+    assert eights[0]["status"][row[0]] != ST_NONE and eights[1]["status"][row[1]] == ST_NONE
+    assert [f for f, _ in shown].count(9) == 1
