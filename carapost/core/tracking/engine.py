@@ -206,7 +206,8 @@ class FrameData:
 #: :func:`fuse_depth` gives the two.  Chosen on the rendered takes (session 13; docs/tracking.md): the
 #: blobs of score 0.999 and above land 0.08-0.12 px from their dots; a smaller DEPTH_PX (a weaker pull
 #: towards the prediction) left more of the close pairs' depth error, a larger one let the prediction,
-#: whose offsets are refreshed from the averaged points, hold the points too firmly (0.3 px: RMS 0.13 mm).
+#: whose offsets are refreshed from the averaged points, hold the points too firmly (156-marker black take:
+#: 0.2 px gave 0.15 mm RMS where 0.08 px gives 0.095 mm).
 DEPTH_PX = 0.08
 PRED_MM_PER_MM = 0.025
 #: A measurement farther than this many standard deviations (per axis) from the prediction is not averaged
@@ -880,7 +881,10 @@ class FrameTracker:
         return X
 
     def _steady_depth(self, rig, X, valid, measured, weight=None):
-        """Bound the depth of points seen only by close cameras by their firm neighbours' prediction.
+        """Average each point with its neighbours' prediction; bound the depth of points seen only by close cameras.
+
+        ``weight`` (N, S): each view's triangulation weight (:func:`confidence`), which
+        scales its information in the average.
 
         A narrow pair's depth is off by mm per pixel of detection error, which its
         residuals do not show; the neighbours seen from both sides place it better.
