@@ -178,12 +178,13 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
             before = read.copy()
             read.clear()
             results.append(tracker.step(f, recs_of(f)))
-            back = results[-1].retract
-            if back is not None and len(results) > 1:
-                results[-2].take_back(back)
+            # A return on the frame before that this frame did not confirm is taken back (engine step 9).
+            taken_back = results[-1].retract is not None and len(results) > 1
+            if taken_back:
+                results[-2].take_back(results[-1].retract)
             if progress is not None:
                 if progress.publishing:
-                    if back is not None and len(results) > 1:
+                    if taken_back:
                         _publish(progress, results[-2], face_ids, brim_ids, brim_idx, brim)
                     _publish(progress, results[-1], face_ids, brim_ids, brim_idx, brim)
                 progress.step(1)
