@@ -168,7 +168,9 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     elongated blob is often two candidates (the ends of its major axis): after the
     first round, answers closer than half the larger minor axis are one blob, and
     only the one whose candidate was nearest its answer is measured on (the others
-    are not ``ok``).  Windows reaching past the image's edge replicate it.  A blob's
+    are not ``ok``); a merged candidate that no kept fit ends within reach of after the
+    last round (the one kept went elsewhere, or failed) is measured on its own
+    (:func:`_unclaimed`).  Windows reaching past the image's edge replicate it.  A blob's
     stage-2 measurements are taken in its last round only: where the merge made it
     not ``ok`` after they were skipped, its ``extra`` row is NaN.
     """
@@ -181,6 +183,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
     cx, cy, rr = x.astype(np.float64), y.astype(np.float64), np.maximum(r0.astype(np.float64), 1.0)
     todo = np.arange(n)
     img = np.ascontiguousarray(bright)
+    merged = np.zeros(0, np.int64)
     for rnd in range(ROUNDS):
         # The stage-2 measurements of a blob measured again are the next round's.
         _measure_round(img, cx, cy, rr, todo, noise, PASSES if rnd == 0 else 2, out, ok, extra, rnd == ROUNDS - 1)
@@ -194,12 +197,33 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
             keep = good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]
             ok[good] = False
             ok[keep] = True
+            merged = np.setdiff1d(good, keep, assume_unique=True)
+            first = out[0][merged], out[1][merged], np.maximum(2.0, 0.5 * out[3][merged])
         # The ok ones whose centre moved over half a pixel or whose weights' radius
         # clip(GROW * major / 2, 1, WINDOWS[-1] - BORDER) changed by over a tenth; (cx, cy, rr) updated.
         todo = next_round(todo, ok, out, cx, cy, rr, _AGAIN)
         if len(todo) == 0:
             break
+    if len(merged):
+        # A merged candidate whose blob no kept fit ended on: the one it was merged into went
+        # elsewhere (a coarser candidate's window took in a neighbour) or failed.  Measured on its own.
+        alone = _unclaimed(first, out[0][ok], out[1][ok])
+        if alone.any():
+            again = merged[alone]
+            sub = fit_candidates(bright, x[again], y[again], r0[again], noise)
+            for k in range(5):
+                out[k][again] = sub[k]
+            ok[again], extra[again] = sub[5], sub[6]
     return (*out, ok, extra)
+
+
+def _unclaimed(first, kx, ky) -> np.ndarray:
+    """Which of the first-round answers ``first = (x, y, reach)`` have no kept fit ``(kx, ky)`` within reach."""
+    fx, fy, reach = first
+    if len(kx) == 0:
+        return np.ones(len(fx), bool)
+    d2 = (fx[:, None] - kx[None]) ** 2 + (fy[:, None] - ky[None]) ** 2
+    return d2.min(1) > reach ** 2
 
 
 def _greedy_nms(x, y, rad, score, use_max: bool, extra: float) -> np.ndarray:

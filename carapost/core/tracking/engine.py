@@ -103,11 +103,32 @@ def blob_weight(prob: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(decades), 1.0 / (1.0 + SCORE_ERROR_SLOPE * decades), 1.0)
 
 
+#: An oblique dot's centre is less sure along its major axis: blob views' equation along it is weighted
+#: ``1 / (1 + ELONG_SLOPE max(0, ELONG_FROM - minor/major)^2)`` times the one across (docs/tracking.md).
+ELONG_FROM = 0.7
+ELONG_SLOPE = 8.0
+
+
+def elongation(rec: np.ndarray) -> np.ndarray:
+    """``(cos, sin, k)`` of detections ``rec`` (their major axis' direction and its weight, :data:`ELONG_SLOPE`)."""
+    ratio = rec["minor"].astype(float) / np.maximum(rec["major"].astype(float), 1e-6)
+    a = np.radians(rec["angle"].astype(float))
+    k = 1.0 / (1.0 + ELONG_SLOPE * np.maximum(ELONG_FROM - ratio, 0.0) ** 2)
+    return np.column_stack([np.cos(a), np.sin(a), k])
+
+
 def confidence(src: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
     """Triangulation weight of each view of ``src`` (N, S): :func:`blob_weight` of its detection's
     score ``prob`` (N, S) for a blob (1 without), ``PATCH_WEIGHT`` for a patch."""
     blob = 1.0 if prob is None else blob_weight(prob)
     return np.where(src == SRC_PATCH, PATCH_WEIGHT, blob)
+
+
+def _round_views(N: int, S: int) -> np.ndarray:
+    """``(N, S, 3)`` elongation of views all round (k = 1)."""
+    el = np.zeros((N, S, 3))
+    el[..., 2] = 1.0
+    return el
 
 
 def on_ray(rig: RigState, uv_c: np.ndarray, views: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,6 +197,7 @@ class FrameData:
         self.local = np.arange(G) - self.offsets[self.sensor]
         self.size_all = np.concatenate(self.size) if G else np.zeros((0, 2))
         self.prob_all = (np.concatenate([r["score"] for r in recs]).astype(float) if G else np.zeros(0))
+        self.el_all = elongation(np.concatenate(recs)) if G else np.zeros((0, 3))
         self.xy_all = np.concatenate(self.xy) if G else np.zeros((0, 2))
         self.raw_all = np.concatenate(self.raw) if G else np.zeros((0, 2))
         self.free = np.ones(G, bool)
@@ -304,6 +326,7 @@ class FrameTracker:
         # Points back from a loss on two views on the last frame: kept only if this frame finds them too.
         self.tentative = np.zeros(self.N, bool)
         self._prob = np.full((self.N, self.S), np.nan)    # this frame's views' classifier scores (blobs)
+        self._el = _round_views(self.N, self.S)            # and their elongation (:func:`elongation`)
         # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
         self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
         # Each view's last blob sample (frame, raw px): patches are matched against the marker's
@@ -503,6 +526,8 @@ class FrameTracker:
         uv_raw[r, s] = fd.raw_all[g]
         self._prob = np.full((N, S), np.nan)
         self._prob[r, s] = fd.prob_all[g]
+        self._el = _round_views(N, S)
+        self._el[r, s] = fd.el_all[g]
         # 5. Patch tracking where no blob matched.
         if self.images is not None and self.prev_frame is not None:
             self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det)
@@ -530,7 +555,7 @@ class FrameTracker:
             uvall = np.concatenate([buv_c, uv_c[multi]])
             vall = np.concatenate([bdet >= 0, valid[multi]])
             rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
-            X = triangulate(rig, uv_c, valid, confidence(src, self._prob))
+            X = triangulate(rig, uv_c, valid, confidence(src, self._prob), self._el)
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
         X, pred, clamped = self._steady_depth(rig, X, valid, measured, confidence(src, self._prob))
@@ -693,7 +718,7 @@ class FrameTracker:
         held-out limit.  The held-out test runs again on a point that still has 3+ views after losing
         one, as long as each further drop brings it nearer that prediction.
         """
-        X = triangulate(rig, uv_c, valid, confidence(src, self._prob))
+        X = triangulate(rig, uv_c, valid, confidence(src, self._prob), self._el)
         err = reprojection(rig, X, uv_c, valid)
         if not self.p.remove_bad_2d_projections:
             return X, err
@@ -707,7 +732,7 @@ class FrameTracker:
             valid[bad, s] = False
             src[bad, s] = SRC_NONE
             uv_c[bad, s] = np.nan
-            X[bad] = triangulate(rig, uv_c[bad], valid[bad], confidence(src[bad], self._prob[bad]))
+            X[bad] = triangulate(rig, uv_c[bad], valid[bad], confidence(src[bad], self._prob[bad]), self._el[bad])
             err[bad] = reprojection(rig, X[bad], uv_c[bad], valid[bad])
         # A wrong view of a 3+-view point shares its error with the others; held out, it shows in full.
         rows = np.flatnonzero(valid.sum(1) >= 3)
@@ -755,7 +780,7 @@ class FrameTracker:
             valid[b, s] = False
             src[b, s] = SRC_NONE
             uv_c[b, s] = np.nan
-            X[b] = triangulate(rig, uv_c[b], valid[b], confidence(src[b], self._prob[b]))
+            X[b] = triangulate(rig, uv_c[b], valid[b], confidence(src[b], self._prob[b]), self._el[b])
             err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
             # A point may hold two wrong views (a drifting patch and another marker's blob): the views
             # left are judged again, against the same limit (the frame's spread of good views).
@@ -851,7 +876,7 @@ class FrameTracker:
         uv_c[b, s] = np.nan
         r = np.unique(b)
         v = src[r] != SRC_NONE
-        X[r] = triangulate(rig, uv_c[r], v, confidence(src[r], self._prob[r]))
+        X[r] = triangulate(rig, uv_c[r], v, confidence(src[r], self._prob[r]), self._el[r])
         err[r] = reprojection(rig, X[r], uv_c[r], v)
 
     def _patch_depth(self, rig, X, uv_c, src, measured, motion):
@@ -998,7 +1023,8 @@ class FrameTracker:
                 for s in views:
                     v = valid[i].copy()
                     v[s] = False
-                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], confidence(src[i:i + 1], self._prob[i:i + 1]))[0]
+                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], confidence(src[i:i + 1], self._prob[i:i + 1]),
+                                     self._el[i:i + 1])[0]
                     e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
                     d = np.linalg.norm(Xi - pred[i])
                     if d <= lim[i] and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:

@@ -101,7 +101,17 @@ def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.where(v, 1.0 / np.maximum(np.abs(depth), 1e-3), 0.0) * 100.0
 
 
-def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+def _elongation(elong, shape) -> np.ndarray:
+    """The kernels' ``(n, S, 3)`` view elongation (``(cos, sin, k)``; k = 1 for round views)."""
+    if elong is not None:
+        return np.ascontiguousarray(elong, dtype=float)
+    el = np.zeros((*shape, 3))
+    el[..., 2] = 1.0
+    return el
+
+
+def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.ndarray | None = None,
+                elong: np.ndarray | None = None) -> np.ndarray:
     """Batched triangulation in corrected pixels.
 
     Linear least squares on the DLT equations, solved twice: the second solve
@@ -117,6 +127,9 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.n
         Each view's confidence, the inverse of its expected image error relative
         to a blob's (1: a blob; less for a patch track, which lands several times
         farther from the marker); None: all 1.
+    elong : ndarray (N, S, 3), optional
+        Each view's ``(cos, sin, k)``: its error along the image direction (cos, sin) is 1/k times
+        its error across it (an oblique dot's centre is less sure along its major axis); None: round.
 
     Returns
     -------
@@ -133,15 +146,17 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.n
     uv = np.where(v[..., None], uv_c[ok], 0.0)
     conf = 1.0 if weight is None else weight[ok]
     w = v * conf
+    el = _elongation(None if elong is None else elong[ok], v.shape)
     for _ in range(2):
-        X = dlt_solve(P, uv, w)
+        X = dlt_solve(P, uv, w, el)
         w = _depth_weights(P, X, v) * conf
     out[ok] = X
     return out
 
 
 def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
-                    X: np.ndarray | None = None, weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    X: np.ndarray | None = None, weight: np.ndarray | None = None,
+                    elong: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each view's error against the point triangulated from the other views.
 
     Parameters
@@ -153,6 +168,8 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
         The points triangulated from all their views (with ``weight``), when already known.
     weight : ndarray (N, S), optional
         The views' confidence, as for :func:`triangulate`.
+    elong : ndarray (N, S, 3), optional
+        The views' elongation, as for :func:`triangulate`.
 
     Returns
     -------
@@ -165,9 +182,9 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     P = rig.P()
     uv = np.where(valid[..., None], uv_c, 0.0)
     if X is None:
-        X = triangulate(rig, uv_c, valid, weight)
+        X = triangulate(rig, uv_c, valid, weight, elong)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
-    Xs = dlt_held_out(P, uv, w)                                   # (S, N, 3) without view s
+    Xs = dlt_held_out(P, uv, w, _elongation(elong, valid.shape))                                 # (S, N, 3) without view s
     S = valid.shape[1]
     proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
     Xs = Xs.transpose(1, 0, 2)

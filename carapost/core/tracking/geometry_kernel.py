@@ -26,8 +26,12 @@ from ..jit import JIT_EXACT
 
 
 @njit(**JIT_EXACT)
-def _view_terms(P, uv, w, i, s, m, b):
-    """View ``s`` of point ``i``'s share of the normal equations: upper triangle ``m`` (6,) and ``b`` (3,)."""
+def _view_terms(P, uv, w, el, i, s, m, b):
+    """View ``s`` of point ``i``'s share of the normal equations: upper triangle ``m`` (6,) and ``b`` (3,).
+
+    ``el[i, s] = (cos, sin, k)``: the view's equation along the image direction (cos, sin) is
+    weighted ``k`` times the one across it (1: the same, as for a round dot).
+    """
     u = uv[i, s, 0]
     v = uv[i, s, 1]
     ws = w[i, s]
@@ -39,6 +43,15 @@ def _view_terms(P, uv, w, i, s, m, b):
     a11 = (v * P[s, 2, 1] - P[s, 1, 1]) * ws
     a12 = (v * P[s, 2, 2] - P[s, 1, 2]) * ws
     a13 = (v * P[s, 2, 3] - P[s, 1, 3]) * ws
+    k = el[i, s, 2]
+    if k != 1.0:
+        # The two equations turned to the directions along and across (c, t), the first weighted k.
+        c = el[i, s, 0]
+        t = el[i, s, 1]
+        a00, a10 = k * (c * a00 + t * a10), c * a10 - t * a00
+        a01, a11 = k * (c * a01 + t * a11), c * a11 - t * a01
+        a02, a12 = k * (c * a02 + t * a12), c * a12 - t * a02
+        a03, a13 = k * (c * a03 + t * a13), c * a13 - t * a03
     m[0] = a00 * a00 + a10 * a10
     m[1] = a00 * a01 + a10 * a11
     m[2] = a00 * a02 + a10 * a12
@@ -73,14 +86,14 @@ def _solve_into(m, b, out, i):
 
 
 @njit(**JIT_EXACT)
-def _view_sums(P, uv, w, i, ms, bs, msum, bsum):
+def _view_sums(P, uv, w, el, i, ms, bs, msum, bsum):
     """Point ``i``'s normal-equation terms of each view into ``ms[s]``, ``bs[s]``, and their sums (view order)."""
     for j in range(6):
         msum[j] = 0.0
     for j in range(3):
         bsum[j] = 0.0
     for s in range(w.shape[1]):
-        _view_terms(P, uv, w, i, s, ms[s], bs[s])
+        _view_terms(P, uv, w, el, i, s, ms[s], bs[s])
         for j in range(6):
             msum[j] += ms[s, j]
         for j in range(3):
@@ -88,8 +101,9 @@ def _view_sums(P, uv, w, i, ms, bs, msum, bsum):
 
 
 @njit(**JIT_EXACT)
-def dlt_solve(P, uv, w):
-    """Weighted DLT points ``(n, 3)`` of ``uv`` (n, S, 2) with view weights ``w`` (n, S) (0: not a view)."""
+def dlt_solve(P, uv, w, el):
+    """Weighted DLT points ``(n, 3)`` of ``uv`` (n, S, 2) with view weights ``w`` (n, S) (0: not a view)
+    and each view's elongation ``el`` (n, S, 3) (:func:`_view_terms`)."""
     n, S = w.shape
     out = np.empty((n, 3))
     ms = np.empty((S, 6))
@@ -97,13 +111,13 @@ def dlt_solve(P, uv, w):
     msum = np.empty(6)
     bsum = np.empty(3)
     for i in range(n):
-        _view_sums(P, uv, w, i, ms, bs, msum, bsum)
+        _view_sums(P, uv, w, el, i, ms, bs, msum, bsum)
         _solve_into(msum, bsum, out, i)
     return out
 
 
 @njit(**JIT_EXACT)
-def dlt_held_out(P, uv, w):
+def dlt_held_out(P, uv, w, el):
     """Points ``(S, n, 3)`` of :func:`dlt_solve` with view ``s`` left out of the sum (all views' sum minus its own)."""
     n, S = w.shape
     out = np.empty((S, n, 3))
@@ -115,7 +129,7 @@ def dlt_held_out(P, uv, w):
     b = np.empty(3)
     row = np.empty((1, 3))
     for i in range(n):
-        _view_sums(P, uv, w, i, ms, bs, msum, bsum)
+        _view_sums(P, uv, w, el, i, ms, bs, msum, bsum)
         for s in range(S):
             for j in range(6):
                 m[j] = msum[j] - ms[s, j]
