@@ -17,7 +17,7 @@ from . import elastic, patch, reacquire, vote
 from .nearest import SortedSweep
 from .assign import candidates, mutual_best, size_changed
 from .geometry import (RigState, depth_uncertainty, held_out_errors, information, refine_poses, reprojection,
-                       triangulate)
+                       round_views, triangulate)
 from .params import TrackingParams
 
 #: Pass 1 accepts a match when the next candidate is this many times farther (ratio test).
@@ -122,13 +122,6 @@ def confidence(src: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
     score ``prob`` (N, S) for a blob (1 without), ``PATCH_WEIGHT`` for a patch."""
     blob = 1.0 if prob is None else blob_weight(prob)
     return np.where(src == SRC_PATCH, PATCH_WEIGHT, blob)
-
-
-def _round_views(N: int, S: int) -> np.ndarray:
-    """``(N, S, 3)`` elongation of views all round (k = 1)."""
-    el = np.zeros((N, S, 3))
-    el[..., 2] = 1.0
-    return el
 
 
 def on_ray(rig: RigState, uv_c: np.ndarray, views: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -326,7 +319,7 @@ class FrameTracker:
         # Points back from a loss on two views on the last frame: kept only if this frame finds them too.
         self.tentative = np.zeros(self.N, bool)
         self._prob = np.full((self.N, self.S), np.nan)    # this frame's views' classifier scores (blobs)
-        self._el = _round_views(self.N, self.S)            # and their elongation (:func:`elongation`)
+        self._el = round_views((self.N, self.S))            # and their elongation (:func:`elongation`)
         # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
         self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
         # Each view's last blob sample (frame, raw px): patches are matched against the marker's
@@ -526,7 +519,7 @@ class FrameTracker:
         uv_raw[r, s] = fd.raw_all[g]
         self._prob = np.full((N, S), np.nan)
         self._prob[r, s] = fd.prob_all[g]
-        self._el = _round_views(N, S)
+        self._el = round_views((N, S))
         self._el[r, s] = fd.el_all[g]
         # 5. Patch tracking where no blob matched.
         if self.images is not None and self.prev_frame is not None:

@@ -101,13 +101,16 @@ def _depth_weights(P: np.ndarray, X: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.where(v, 1.0 / np.maximum(np.abs(depth), 1e-3), 0.0) * 100.0
 
 
-def _elongation(elong, shape) -> np.ndarray:
-    """The kernels' ``(n, S, 3)`` view elongation (``(cos, sin, k)``; k = 1 for round views)."""
-    if elong is not None:
-        return np.ascontiguousarray(elong, dtype=float)
+def round_views(shape: tuple) -> np.ndarray:
+    """``(*shape, 3)`` view elongation ``(cos, sin, k)`` of views all round (k = 1), as :func:`triangulate` takes it."""
     el = np.zeros((*shape, 3))
     el[..., 2] = 1.0
     return el
+
+
+def _elongation(elong, shape) -> np.ndarray:
+    """The kernels' ``(n, S, 3)`` view elongation: ``elong``, or all round."""
+    return round_views(shape) if elong is None else np.ascontiguousarray(elong, dtype=float)
 
 
 def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.ndarray | None = None,
@@ -184,7 +187,7 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     if X is None:
         X = triangulate(rig, uv_c, valid, weight, elong)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
-    Xs = dlt_held_out(P, uv, w, _elongation(elong, valid.shape))                                 # (S, N, 3) without view s
+    Xs = dlt_held_out(P, uv, w, _elongation(elong, valid.shape))   # (S, N, 3) without view s
     S = valid.shape[1]
     proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
     Xs = Xs.transpose(1, 0, 2)
