@@ -65,6 +65,9 @@ HELD_OUT_FLOOR_PX = 1.0
 #: A two-blob point's view this many times farther from the projection of the neighbours' prediction
 #: than its other view (and beyond Max Allowed 2D Projection Error) is another blob (`_far_pair_view`).
 FAR_PAIR_RATIO = CONFIDENT_RATIO
+#: It is dropped where the pair misses (both views beyond HELD_OUT_FLOOR_PX), or where it meets more than
+#: this (mm) from the neighbours' prediction.
+FAR_PAIR_MEET_MM = 2.0
 
 
 def held_out_limit(errors: np.ndarray, max_error: float) -> float:
@@ -800,8 +803,12 @@ class FrameTracker:
         marker.  Where no neighbour predicts the point, ``pred`` is its own motion (constant velocity
         from the previous frame): a chin dot of the 156-marker take (frame 100 forwards) whose chin
         neighbours were all lost took, in one camera, the next dot's blob 9.7 px away with one good
-        view; the pair missed by 4.3 px per view and passed 5 mm off.  Part of Remove Bad 2D
-        Projections (off: nothing is dropped).  Updates ``X``, ``err``, ``uv_c`` and ``src`` in place.
+        view; the pair missed by 4.3 px per view and passed 5 mm off.  A pair that meets is judged
+        so too where it stands more than ``FAR_PAIR_MEET_MM`` from ``pred``: the white 100-marker
+        take's Chin_R_6 (frame 129 forwards), its dot undetected in camera 3, took a blob 5.4 px away
+        there that lay along the epipolar line of its good view, and passed 3.3 mm off.  Part of
+        Remove Bad 2D Projections (off: nothing is dropped).  Updates ``X``, ``err``, ``uv_c`` and
+        ``src`` in place.
         """
         if not self.p.remove_bad_2d_projections:
             return
@@ -816,7 +823,9 @@ class FrameTracker:
         near_d = np.nanmin(d, axis=1)
         far_d = d[np.arange(len(rows)), far]
         e = np.nanmin(np.where(v, err[rows], np.nan), axis=1)
-        bad = ((e > HELD_OUT_FLOOR_PX) & (far_d > float(self.p.max_allowed_2d_projection_error))
+        off = np.linalg.norm(X[rows] - pred[rows], axis=1)
+        meets_far = (FAR_PAIR_MEET_MM > 0) & (off > FAR_PAIR_MEET_MM)
+        bad = (((e > HELD_OUT_FLOOR_PX) | meets_far) & (far_d > float(self.p.max_allowed_2d_projection_error))
                & (far_d >= FAR_PAIR_RATIO * np.maximum(near_d, HELD_OUT_FLOOR_PX)))
         if not np.any(bad):
             return
