@@ -217,13 +217,14 @@ def test_a_jaw_jerk_seen_by_every_camera_is_kept(quiet, jump_mm, kept):
         assert r.status[m] == ST_NONE
 
 
-def pair_that_misses(rig, X, raw, m, off_px):
+def pair_that_misses(rig, X, raw, m, off_px, meet=False):
     """Point ``m`` seen by cameras 0 and 2 only, camera 0's blob moved ``off_px`` across the epipolar line
-    of camera 2's view (the two rays miss each other).  Returns the raw detections and which are present."""
+    of camera 2's view (the two rays miss each other), or along it (``meet``: the rays still meet, on
+    camera 2's ray, millimetres from the dot).  Returns the raw detections and which are present."""
     o, dr = rig.rays(np.array([2]), rig.project(X[m][None])[0, 2][None])
     line = rig.project(np.stack([o[0] + t * dr[0] for t in np.dot(X[m] - o[0], dr[0]) + np.array([-5.0, 5.0])]))[:, 0]
     along = (line[1] - line[0]) / np.linalg.norm(line[1] - line[0])
-    uv0 = rig.project(X[m][None])[0, 0] + off_px * np.array([-along[1], along[0]])
+    uv0 = rig.project(X[m][None])[0, 0] + off_px * (along if meet else np.array([-along[1], along[0]]))
     raw2 = raw.copy()
     raw2[m, 0] = rig.cameras[0].distort(uv0)
     present = np.ones(raw.shape[:2], bool)
@@ -278,20 +279,6 @@ def test_a_pair_that_misses_is_checked_against_its_own_motion_where_no_neighbour
         assert r.status[m] == ST_NONE or np.linalg.norm(r.X[m] - X[m]) < 0.5
 
 
-def pair_that_meets(rig, X, raw, m, off_px):
-    """As :func:`pair_that_misses`, camera 0's blob moved ``off_px`` along the epipolar line instead: the
-    rays still meet, on camera 2's ray, millimetres from the dot."""
-    o, dr = rig.rays(np.array([2]), rig.project(X[m][None])[0, 2][None])
-    line = rig.project(np.stack([o[0] + t * dr[0] for t in np.dot(X[m] - o[0], dr[0]) + np.array([-5.0, 5.0])]))[:, 0]
-    along = (line[1] - line[0]) / np.linalg.norm(line[1] - line[0])
-    uv0 = rig.project(X[m][None])[0, 0] + off_px * along
-    raw2 = raw.copy()
-    raw2[m, 0] = rig.cameras[0].distort(uv0)
-    present = np.ones(raw.shape[:2], bool)
-    present[m, [1, 3]] = False
-    return raw2, present
-
-
 @pytest.mark.parametrize("off_px,kept", [(0.0, True), (6.0, False)])
 def test_a_pair_that_meets_far_from_the_prediction_loses_its_far_view(quiet, off_px, kept):
     """Chin_R_6 of the white 100-marker take (seed 2), frame 129 forwards: its own dot undetected in
@@ -304,7 +291,7 @@ def test_a_pair_that_meets_far_from_the_prediction_loses_its_far_view(quiet, off
     """
     T, rig, X, raw = tracker_after(quiet)
     m = 3
-    raw2, present = pair_that_meets(rig, X, raw, m, off_px)
+    raw2, present = pair_that_misses(rig, X, raw, m, off_px, meet=True)
     recs, index = recs_from(raw2, present)
     r = T.step(1, recs)
     assert r.det[m, 2] == index[m, 2]
