@@ -192,8 +192,9 @@ class FrameData:
         self.sensor = np.repeat(np.arange(len(recs)), [len(r) for r in recs])
         self.local = np.arange(G) - self.offsets[self.sensor]
         self.size_all = np.concatenate(self.size) if G else np.zeros((0, 2))
-        self.prob_all = (np.concatenate([r["score"] for r in recs]).astype(float) if G else np.zeros(0))
-        self.el_all = elongation(np.concatenate(recs)) if G else np.zeros((0, 3))
+        every = np.concatenate(recs) if G else None
+        self.prob_all = every["score"].astype(float) if G else np.zeros(0)
+        self.el_all = elongation(every) if G else np.zeros((0, 3))
         self.xy_all = np.concatenate(self.xy) if G else np.zeros((0, 2))
         self.raw_all = np.concatenate(self.raw) if G else np.zeros((0, 2))
         self.free = np.ones(G, bool)
@@ -551,10 +552,10 @@ class FrameTracker:
             uvall = np.concatenate([buv_c, uv_c[multi]])
             vall = np.concatenate([bdet >= 0, valid[multi]])
             rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
-            X = triangulate(rig, uv_c, valid, confidence(src, self._prob), self._el)
+            X = triangulate(rig, uv_c, valid, *self._view_weights(src))
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
-        X, pred, clamped = self._steady_depth(rig, X, valid, measured, confidence(src, self._prob))
+        X, pred, clamped = self._steady_depth(rig, X, valid, measured, self._view_weights(src)[0])
         X = self._patch_depth(rig, X, uv_c, src, measured, motion)
         if p.remove_bad_3d_points and np.any(measured):
             # Three or more agreeing blob views outweigh a prediction: a jaw speeding up from 3.6 to 9 mm a
@@ -631,6 +632,10 @@ class FrameTracker:
                            bdet, buv_raw, bscore, berr, retract if np.any(retract) else None)
 
     # --------------------------------------------------------------- sub-steps
+    def _view_weights(self, src, rows=slice(None)):
+        """This frame's triangulation weights of the views ``src[rows]``: (:func:`confidence`, elongation)."""
+        return confidence(src[rows], self._prob[rows]), self._el[rows]
+
     def _first_two(self, Pi, Si, Dd):
         """Of :meth:`_search`'s rows (k=2): each slot's first row, its distance and the second's (inf none)."""
         if len(Pi) == 0:
@@ -714,7 +719,7 @@ class FrameTracker:
         held-out limit.  The held-out test runs again on a point that still has 3+ views after losing
         one, as long as each further drop brings it nearer that prediction.
         """
-        X = triangulate(rig, uv_c, valid, confidence(src, self._prob), self._el)
+        X = triangulate(rig, uv_c, valid, *self._view_weights(src))
         err = reprojection(rig, X, uv_c, valid)
         if not self.p.remove_bad_2d_projections:
             return X, err
@@ -728,7 +733,7 @@ class FrameTracker:
             valid[bad, s] = False
             src[bad, s] = SRC_NONE
             uv_c[bad, s] = np.nan
-            X[bad] = triangulate(rig, uv_c[bad], valid[bad], confidence(src[bad], self._prob[bad]), self._el[bad])
+            X[bad] = triangulate(rig, uv_c[bad], valid[bad], *self._view_weights(src, bad))
             err[bad] = reprojection(rig, X[bad], uv_c[bad], valid[bad])
         # A wrong view of a 3+-view point shares its error with the others; held out, it shows in full.
         rows = np.flatnonzero(valid.sum(1) >= 3)
@@ -776,7 +781,7 @@ class FrameTracker:
             valid[b, s] = False
             src[b, s] = SRC_NONE
             uv_c[b, s] = np.nan
-            X[b] = triangulate(rig, uv_c[b], valid[b], confidence(src[b], self._prob[b]), self._el[b])
+            X[b] = triangulate(rig, uv_c[b], valid[b], *self._view_weights(src, b))
             err[b] = reprojection(rig, X[b], uv_c[b], valid[b])
             # A point may hold two wrong views (a drifting patch and another marker's blob): the views
             # left are judged again, against the same limit (the frame's spread of good views).
@@ -878,7 +883,7 @@ class FrameTracker:
         uv_c[b, s] = np.nan
         r = np.unique(b)
         v = src[r] != SRC_NONE
-        X[r] = triangulate(rig, uv_c[r], v, confidence(src[r], self._prob[r]), self._el[r])
+        X[r] = triangulate(rig, uv_c[r], v, *self._view_weights(src, r))
         err[r] = reprojection(rig, X[r], uv_c[r], v)
 
     def _patch_depth(self, rig, X, uv_c, src, measured, motion):
@@ -1025,8 +1030,7 @@ class FrameTracker:
                 for s in views:
                     v = valid[i].copy()
                     v[s] = False
-                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], confidence(src[i:i + 1], self._prob[i:i + 1]),
-                                     self._el[i:i + 1])[0]
+                    Xi = triangulate(rig, uv_c[i:i + 1], v[None], *self._view_weights(src, slice(i, i + 1)))[0]
                     e = reprojection(rig, Xi[None], uv_c[i:i + 1], v[None])[0]
                     d = np.linalg.norm(Xi - pred[i])
                     if d <= lim[i] and np.nanmax(e) <= self.p.max_allowed_2d_projection_error and d < best_d:
