@@ -583,6 +583,17 @@ class FrameTracker:
             status[okk] = ST_SINGLE
             drop = one & ~okk
             src[drop] = SRC_NONE
+        # A return from a loss on two views is the weakest evidence there is: a wide pair meets wherever one
+        # blob lies near the other's epipolar line, and a lower lip lost with the jaw open came back on two
+        # stray blobs 10 px off its dot, 3.5 mm off.  Such a return stands once the next frame measures the
+        # point again from two blob views (one view on the ray near the return confirms nothing, and nor do
+        # patches: their templates are the return's own blobs, so they follow whatever it took).  Until
+        # then its offsets are not refreshed from it; a return taken back leaves no patch templates, and a
+        # point that only such patches see is not measured on this frame either.
+        blobs = (src == SRC_DETECTION).sum(1)
+        retract = self.tentative & ((status != ST_RECONSTRUCTED) | (blobs < 2))
+        status[retract & (blobs == 0)] = ST_NONE
+        self.blob_frame[retract] = -1
         nothing = status == ST_NONE
         src[nothing] = SRC_NONE
         valid = src != SRC_NONE
@@ -595,12 +606,6 @@ class FrameTracker:
         residual = np.sqrt(np.where(valid, err, 0.0) ** 2 @ np.ones(S) / np.maximum(nv, 1))
         residual = np.where(nv > 0, residual, np.nan)
         X[nothing] = np.nan
-        # A return from a loss on two views is the weakest evidence there is: a wide pair meets wherever one
-        # blob lies near the other's epipolar line, and a lower lip lost with the jaw open came back on two
-        # stray blobs 10 px off its dot, 3.5 mm off.  Such a return stands once the next frame measures the
-        # point again from two views or more (one view on the ray near the return confirms nothing); until
-        # then its offsets are not refreshed from it.
-        retract = self.tentative & (status != ST_RECONSTRUCTED)
         tentative = lost & (status == ST_RECONSTRUCTED) & (valid.sum(1) == 2)
         # 9. Carry the state to the next frame.
         have = ~nothing
