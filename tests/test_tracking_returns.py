@@ -10,7 +10,7 @@ import copy
 import numpy as np
 import pytest
 
-from carapost.core.points import ST_NONE, ST_SINGLE
+from carapost.core.points import SRC_PATCH, ST_NONE, ST_SINGLE
 from carapost.core.tracking import track
 from support import remove_marker_detection
 
@@ -28,11 +28,11 @@ def hide(sc, m, frames, keep=()):
                 remove_marker_detection(sc, f, s, m)
 
 
-def tracked_point(sc, m):
-    """Track forwards from frame 0 and return marker ``m``'s point."""
+def tracked_point(sc, m, images=None):
+    """Track forwards from frame 0 (``images`` for patch tracking) and return marker ``m``'s point."""
     from carapost.core.tracking.evaluate import identify
     ident = identify(sc, 0)
-    track(sc.project, 0, 1).do(sc.project)
+    track(sc.project, 0, 1, images=images).do(sc.project)
     return sc.project.points[next(pid for pid, mm in ident.items() if mm == m)]
 
 
@@ -83,10 +83,6 @@ def test_patches_that_follow_a_return_do_not_confirm_it(quiet):
     the next frames' patches followed that blob and confirmed the return, and the point went 3-4.5 mm off
     for nine samples.  Here the return's blobs are right, but only blobs may confirm it all the same.
     """
-    import test_tracking
-    from carapost.core.points import SRC_PATCH
-    from carapost.core.tracking.evaluate import identify
-
     sc = copy.deepcopy(quiet)
     m = 5
     hide(sc, m, range(4, 13), {8: (1, 3)})
@@ -97,9 +93,7 @@ def test_patches_that_follow_a_return_do_not_confirm_it(quiet):
         if (s, f) not in cache:
             cache[(s, f)] = test_tracking.render(sc, s, f, drop=(m,) if f == 9 else ())
         return cache[(s, f)]
-    pid = next(p for p, mm in identify(sc, 0).items() if mm == m)
-    track(sc.project, 0, 1, images=images).do(sc.project)
-    p = sc.project.points[pid]
+    p = tracked_point(sc, m, images)
     assert p.status[6] == ST_NONE
     assert p.status[8] == ST_NONE and p.det[8].max() == -1        # taken back
     assert p.status[9] == ST_NONE and not np.any(p.src[9] == SRC_PATCH)
