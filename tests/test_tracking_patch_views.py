@@ -2,17 +2,17 @@
 
 On the rendered sample takes a patch track lands ~0.6 px from its marker, five times a blob
 centre's error (its template is often the last blob of a dot already half hidden, and the dot's
-look changes under it).  Each test rebuilds one situation on frame 0 of a synthetic take with
+look changes under it).  Each test rebuilds one situation of those takes on a synthetic take with
 ground truth and fails without the rule it is named after.
 """
 import numpy as np
 
 from carapost.core.points import SRC_DETECTION, SRC_NONE, SRC_PATCH
 from carapost.core.tracking.engine import PATCH_WEIGHT, confidence
-from carapost.core.tracking.geometry import reprojection, triangulate
-import test_tracking
-from support import remove_marker_detection
+from carapost.core.tracking.geometry import triangulate
 from carapost.core.tracking import track
+from support import remove_marker_detection
+import test_tracking
 from test_tracking_wrong_blobs import tracker_after
 
 #: 35 markers of slow head motion (its frame 0 gives the rig and the face).
@@ -62,12 +62,12 @@ def test_one_blob_and_patches_keep_the_depth_their_views_give(quiet):
 
     White 35-marker rendered take backwards, Lip_Lower_R, frames 114-110: one blob view and patch views
     0.3-0.7 px from the dot, while the neighbours' prediction (lower-lip neighbours lost, the jaw
-    moving) was 2.2 mm off along the blob's ray.  Placed on that ray at the predicted depth (the rule
-    of session 13's round 4) the point went 2.2, 3.7 and 4.0 mm off: a swap.  The averaging with the
-    prediction by certainty (session 13, later) weighs the patches too, so the point keeps most of the
-    depth they give.  Here marker ``m`` steps 1.5 mm along camera ``s``'s ray on frames 5-9 (its
-    image there does not move) and only camera ``s`` keeps its blob; the other cameras still show the
-    dot, so patches find it.  (With the old rule the point is 1.5 mm off on those frames.)
+    moving) was 2.2 mm off along the blob's ray.  Placed on that ray at the predicted depth (round 4's
+    rule, withdrawn in session 16) the point went 2.2, 3.7 and 4.0 mm off: a swap.  Step 7's averaging
+    with the prediction by certainty, which came later, weighs the patches too, so the point keeps most
+    of the depth they give.  Here marker ``m`` steps 1.5 mm along camera ``s0``'s ray on frames 5-9 (its
+    image there does not move) and only camera ``s0`` keeps its blob; the other cameras still show the
+    dot, so patches find it.  (With the old rule the point is 1.49-1.58 mm off on those frames.)
     """
     m, step = 5, 1.5
     sc = test_tracking.fresh(quiet)
@@ -91,4 +91,4 @@ def test_one_blob_and_patches_keep_the_depth_their_views_give(quiet):
     err = np.linalg.norm(p.pos[5:10] - sc.face[5:10, m], axis=1)
     assert np.all(p.src[5:10, s0] == SRC_DETECTION)
     assert np.all((p.src[5:10][:, others] == SRC_PATCH).sum(1) >= 2)  # one blob and patches, as on the take
-    assert np.all(err < 0.5), err                                   # the old rule: 1.49-1.58 mm
+    assert np.all(err < 0.5), err

@@ -555,9 +555,8 @@ class FrameTracker:
             X = triangulate(rig, uv_c, valid, *self._view_weights(src))
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = np.all(np.isfinite(X), axis=1)
-        # A point of one blob view and patch views is averaged so too (patches weigh PATCH_WEIGHT in its
-        # information): a prediction off along the blob's ray is no longer taken whole (docs/tracking.md,
-        # session 16).
+        # Points of one blob view and patch views too: the patches weigh PATCH_WEIGHT in their information,
+        # and a prediction off along the blob's ray is not taken whole (docs/tracking.md, session 16).
         X, pred, clamped = self._steady_depth(rig, X, valid, measured, self._view_weights(src)[0])
         if p.remove_bad_3d_points and np.any(measured):
             # Three or more agreeing blob views outweigh a prediction: a jaw speeding up from 3.6 to 9 mm a
