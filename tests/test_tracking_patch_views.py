@@ -9,7 +9,7 @@ import numpy as np
 
 from carapost.core.points import SRC_DETECTION, SRC_NONE, SRC_PATCH
 from carapost.core.tracking.engine import PATCH_WEIGHT, confidence
-from carapost.core.tracking.geometry import triangulate
+from carapost.core.tracking.geometry import reprojection, triangulate
 from carapost.core.tracking import track
 from support import remove_marker_detection
 import test_tracking
@@ -55,6 +55,49 @@ def test_a_patch_view_weighs_less_than_the_blob_views(quiet):
     assert np.array_equal(kept[m], src[m])
     assert np.linalg.norm(Xc[m] - X[m]) < 0.35 * np.linalg.norm(equal[m] - X[m])
     assert confidence(src)[m, 3] == PATCH_WEIGHT < 1.0
+
+
+def test_one_blob_and_one_patch_take_the_depth_the_neighbours_predict(quiet):
+    """One blob view and one patch view off along its epipolar line (take_100_2, Lip_Lower_C).
+
+    The blob pins the point's ray; the one patch's error along the epipolar line is all the depth it
+    has (0.4-1.7 mm off while its blob was 0.05-0.3 px off).  It lies on the blob's ray at the depth its
+    neighbours (with 2+ blob views each) predict; its position across the ray stays the blob's.  With
+    two patch views, from two directions, the point keeps the depth they give (the next tests).
+    """
+    T, rig, X, _ = tracker_after(quiet)
+    m = 5
+    src = np.full((len(X), rig.S), SRC_DETECTION, np.uint8)
+    src[m] = [SRC_DETECTION, SRC_NONE, SRC_NONE, SRC_PATCH]
+    valid = src != SRC_NONE
+    uv = shifted(rig, rig.project(X), m, [3], 1.0)
+    Xt = triangulate(rig, uv, valid, confidence(src))
+    assert np.linalg.norm(Xt[m] - X[m]) > 0.4                         # the premise: the patch off in depth
+    measured = np.ones(len(X), bool)
+    Xo = T._patch_depth(rig, Xt, uv, src, measured, None)
+    assert np.linalg.norm(Xo[m] - X[m]) < 0.05
+    assert reprojection(rig, Xo[m:m + 1], uv[m:m + 1], valid[m:m + 1])[0, 0] < 1e-6   # on the blob's ray
+    others = np.arange(len(X)) != m
+    assert np.array_equal(Xo[others], Xt[others])                     # 2+ blob views: left alone
+    src[m, 2] = SRC_PATCH                                             # a second patch view
+    assert np.array_equal(T._patch_depth(rig, Xt, uv, src, measured, None), Xt)
+
+
+def test_one_blob_and_one_patch_follow_the_own_motion_without_neighbours(quiet):
+    """With no neighbour measured by blobs the point's own constant-velocity prediction sets the depth;
+    with neither, it stays where its views put it (nothing better to place it by)."""
+    T, rig, X, _ = tracker_after(quiet)
+    m = 5
+    src = np.full((len(X), rig.S), SRC_NONE, np.uint8)
+    src[m] = [SRC_DETECTION, SRC_NONE, SRC_NONE, SRC_PATCH]
+    uv = shifted(rig, rig.project(X), m, [3], 1.0)
+    Xt = np.full_like(X, np.nan)
+    Xt[m] = triangulate(rig, uv[m:m + 1], (src != SRC_NONE)[m:m + 1], confidence(src[m:m + 1]))[0]
+    measured = np.all(np.isfinite(Xt), axis=1)
+    motion = np.full_like(X, np.nan)
+    assert np.array_equal(T._patch_depth(rig, Xt, uv, src, measured, motion)[m], Xt[m])
+    motion[m] = X[m]
+    assert np.linalg.norm(T._patch_depth(rig, Xt, uv, src, measured, motion)[m] - X[m]) < 0.05
 
 
 def test_one_blob_and_patches_keep_the_depth_their_views_give(quiet):
