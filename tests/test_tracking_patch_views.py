@@ -63,7 +63,7 @@ def test_one_blob_and_one_patch_take_the_depth_the_neighbours_predict(quiet):
     The blob pins the point's ray; the one patch's error along the epipolar line is all the depth it
     has (0.4-1.7 mm off while its blob was 0.05-0.3 px off).  It lies on the blob's ray at the depth its
     neighbours (with 2+ blob views each) predict; its position across the ray stays the blob's.  With
-    two patch views, from two directions, the point keeps the depth they give (the next tests).
+    two patch views, from two directions, the point keeps the depth they give (the last test).
     """
     T, rig, X, _ = tracker_after(quiet)
     m = 5
@@ -106,7 +106,7 @@ def test_one_blob_and_patches_keep_the_depth_their_views_give(quiet):
     White 35-marker rendered take backwards, Lip_Lower_R, frames 114-110: one blob view and patch views
     0.3-0.7 px from the dot, while the neighbours' prediction (lower-lip neighbours lost, the jaw
     moving) was 2.2 mm off along the blob's ray.  Placed on that ray at the predicted depth (round 4's
-    rule, withdrawn in session 16) the point went 2.2, 3.7 and 4.0 mm off: a swap.  Step 7's averaging
+    rule, since session 16 only for one patch view) the point went 2.2, 3.7 and 4.0 mm off: a swap.  Step 7's averaging
     with the prediction by certainty, which came later, weighs the patches too, so the point keeps most
     of the depth they give.  Here marker ``m`` steps 1.5 mm along camera ``s0``'s ray on frames 5-9 (its
     image there does not move) and only camera ``s0`` keeps its blob; the other cameras still show the
