@@ -259,6 +259,17 @@ def render(sc, s, f, drop=()):
     return img
 
 
+def rendered(sc, drop=lambda s, f: ()):
+    """``images(sensor, frame)`` for patch tracking: each image :func:`render` makes, once, with ``drop(s, f)``."""
+    cache = {}
+
+    def images(s, f):
+        if (s, f) not in cache:
+            cache[(s, f)] = render(sc, s, f, drop=drop(s, f))
+        return cache[(s, f)]
+    return images
+
+
 @pytest.mark.parametrize("threshold,size,patched", [(0.8, 15, True), (1.0, 15, False), (0.8, 3, False)])
 def test_patch_tracking_where_no_blob(quiet, threshold, size, patched):
     """Marker 3 loses its blob in one camera for frames 5-9; its grey-level patch is still tracked."""
@@ -266,12 +277,7 @@ def test_patch_tracking_where_no_blob(quiet, threshold, size, patched):
     sc = fresh(quiet)
     for f in range(5, 10):
         remove_marker_detection(sc, f, s0, m)
-    cache = {}
-
-    def images(s, f):
-        if (s, f) not in cache:
-            cache[(s, f)] = render(sc, s, f, drop=(m,) if s == s0 and 5 <= f < 10 else ())
-        return cache[(s, f)]
+    images = rendered(sc, lambda s, f: (m,) if s == s0 and 5 <= f < 10 else ())
     sc.project.properties.set("tracking.patch_match_threshold", threshold)
     sc.project.properties.set("tracking.patch_match_size", size)
     cmd = track(sc.project, 0, 1, end_frame=12, images=images)
@@ -302,12 +308,7 @@ def test_patch_tracking_alone_stops_after_a_few_frames(quiet):
         for s in range(4):
             if sc.face_det[f, s, m] >= 0:
                 remove_marker_detection(sc, f, s, m)
-    cache = {}
-
-    def images(s, f):
-        if (s, f) not in cache:
-            cache[(s, f)] = render(sc, s, f, drop=(m,) if 3 <= f < 15 else ())
-        return cache[(s, f)]
+    images = rendered(sc, lambda s, f: (m,) if 3 <= f < 15 else ())
     track(sc.project, 0, 1, end_frame=20, images=images).do(sc.project)
     p = marker_point(sc, m)
     patched = np.any(p.src == SRC_PATCH, axis=1)

@@ -123,12 +123,7 @@ def test_one_blob_and_patches_keep_the_depth_their_views_give(quiet):
         sc.face[f, m] = sc.face[f, m] + step * d / np.linalg.norm(d)
         for s in others:
             remove_marker_detection(sc, f, s, m)
-    cache = {}
-
-    def images(s, f):
-        if (s, f) not in cache:
-            cache[(s, f)] = test_tracking.render(sc, s, f, drop=(m,) if 5 <= f < 10 else ())
-        return cache[(s, f)]
+    images = test_tracking.rendered(sc, lambda s, f: (m,) if 5 <= f < 10 else ())
     track(sc.project, 0, 1, end_frame=12, images=images).do(sc.project)
     p = test_tracking.marker_point(sc, m)
     err = np.linalg.norm(p.pos[5:10] - sc.face[5:10, m], axis=1)

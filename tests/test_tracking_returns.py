@@ -86,13 +86,8 @@ def test_patches_that_follow_a_return_do_not_confirm_it(quiet):
     sc = copy.deepcopy(quiet)
     m = 5
     hide(sc, m, range(4, 13), {8: (1, 3)})
-    cache = {}
-
-    def images(s, f):
-        # The dot is drawn on frame 9 though no detection is left there: patches find it.
-        if (s, f) not in cache:
-            cache[(s, f)] = test_tracking.render(sc, s, f, drop=(m,) if f == 9 else ())
-        return cache[(s, f)]
+    # The dot is drawn on frame 9 though no detection is left there: patches find it.
+    images = test_tracking.rendered(sc, lambda s, f: (m,) if f == 9 else ())
     p = tracked_point(sc, m, images)
     assert p.status[6] == ST_NONE
     assert p.status[8] == ST_NONE and p.det[8].max() == -1        # taken back
