@@ -68,6 +68,17 @@ FAR_PAIR_RATIO = CONFIDENT_RATIO
 #: It is dropped where the pair misses (both views beyond HELD_OUT_FLOOR_PX), or where it meets more than
 #: this (mm) from the neighbours' prediction.
 FAR_PAIR_MEET_MM = 2.0
+#: A pass-1 anchor of two views farther than this (mm) from its neighbours' prediction (from the other
+#: anchors), and than this plus its last motion from its own constant-velocity prediction, is not an
+#: anchor (`_doubtful_pairs`).
+ANCHOR_PAIR_MM = 2.0
+#: Where no neighbour predicts a point, its own constant-velocity prediction decides which view the
+#: held-out test drops, if the point moved at most this much (mm) on the previous frame: faster, as in
+#: a jaw's turn, that prediction is millimetres off itself.
+MOTION_JUDGE_MM = 1.0
+#: A close pair's point whose depth lies more than this (mm) from its firm neighbours' prediction does
+#: not vote in the prediction of points that have no firm neighbours (`_steady_depth`).
+OFF_DEPTH_VOTE_MM = 2.0
 
 
 def held_out_limit(errors: np.ndarray, max_error: float) -> float:
@@ -473,6 +484,7 @@ class FrameTracker:
         Xa = triangulate(rig, uv_c, valid)
         err = reprojection(rig, Xa, uv_c, valid)
         anchor = (valid.sum(1) >= 2) & np.all(np.nan_to_num(err, nan=0.0) <= p.max_allowed_2d_projection_error, axis=1)
+        anchor &= ~self._doubtful_pairs(Xa, anchor, valid, Xp)
         # Everything else starts again in pass 2 with better predictions.
         det[~anchor] = -1
         score[~anchor] = np.nan
@@ -539,10 +551,14 @@ class FrameTracker:
             uv_raw[stale] = np.nan
         valid = src != SRC_NONE
         # 6. Triangulate, remove bad 2D projections, refine the cameras (brim fixed), triangulate again.
-        X, err = self._triangulate_clean(rig, uv_c, valid, src, det, el)
         # Where the neighbours cannot predict a point (most of them lost, as on a grazing chin), its own
         # motion is the check: a point tracked on the previous frame does not jump millimetres.
         motion = np.where(tracked[:, None], Xp, np.nan)
+        # So too for which view the held-out test drops, where the point moved slowly: a close pair with one
+        # biased blob makes a good wide view look the worst, and nothing else tells them apart.
+        slow = np.linalg.norm(np.nan_to_num(self.V, nan=0.0), axis=1) <= MOTION_JUDGE_MM
+        judge = np.where(np.isfinite(el), el, np.where(slow[:, None], motion, np.nan))
+        X, err = self._triangulate_clean(rig, uv_c, valid, src, det, judge)
         self._far_pair_view(rig, X, err, uv_c, src, np.where(np.isfinite(el), el, motion))
         self._check_patches(rig, X, err, uv_c, src, motion)
         valid = src != SRC_NONE
@@ -640,6 +656,35 @@ class FrameTracker:
     def _view_weights(self, src, rows=slice(None)):
         """This frame's triangulation weights of the views ``src[rows]``: (:func:`confidence`, elongation)."""
         return confidence(src[rows], self._prob[rows]), self._el[rows]
+
+    def _doubtful_pairs(self, Xa, anchor, valid, own):
+        """Pass-1 anchors of two views that neither their neighbours nor their own motion put there.
+
+        Two views meet wherever one blob lies near the other's epipolar line: a chin dot undetected in one
+        camera took a blob 5.4 px from it there, and the pair met 4.6 mm off.  As an anchor it then
+        predicts its neighbours (the next chin dot's prediction went 3.8 mm off, and it lost its one good
+        wide view to the held-out test).  A two-view anchor farther than ``ANCHOR_PAIR_MM`` from the other
+        anchors' elastic prediction and than ``ANCHOR_PAIR_MM`` plus its last frame's motion from its own
+        constant-velocity prediction (``own``) waits for pass 2 instead.  Three or more agreeing views
+        stay anchors whatever the predictions say (a jaw jerk moves them all).
+        """
+        bad = np.zeros(self.N, bool)
+        pair = anchor & (valid.sum(1) == 2)
+        if not np.any(pair):
+            return bad
+        firm = anchor.copy()
+        # A constant-velocity prediction is off by about the change of velocity: more, the faster the point.
+        speed = np.linalg.norm(np.nan_to_num(self.V, nan=0.0), axis=1)
+        for _ in range(2):      # once more without the pairs found: one may have swayed another's prediction
+            el, _ = elastic.predict(Xa, firm, self.nb, self.off, weight=self.w)
+            far_el = np.linalg.norm(Xa - el, axis=1) > ANCHOR_PAIR_MM
+            far_own = ~(np.linalg.norm(Xa - own, axis=1) <= ANCHOR_PAIR_MM + speed)     # NaN (no motion): far
+            new = pair & firm & far_el & far_own
+            if not np.any(new):
+                break
+            bad |= new
+            firm &= ~new
+        return bad
 
     def _first_two(self, Pi, Si, Dd):
         """Of :meth:`_search`'s rows (k=2): each slot's first row, its distance and the second's (inf none)."""
@@ -948,7 +993,9 @@ class FrameTracker:
             Points whose measured depth was beyond the bound (their offsets are not refreshed).
 
         Every measured point's position is first averaged with the prediction, each weighted by
-        its certainty (:func:`fuse_depth`); the bound applies to the average.
+        its certainty (:func:`fuse_depth`); the bound applies to the average.  A narrow point more
+        than ``OFF_DEPTH_VOTE_MM`` deep of its firm neighbours' prediction does not vote in the
+        prediction of points without firm neighbours.
         """
         u, mm = depth_uncertainty(rig, X, valid & measured[:, None])
         narrow = measured & (mm > NARROW_MM_PER_PX)
@@ -956,6 +1003,7 @@ class FrameTracker:
         clamped = np.zeros(len(X), bool)
         has_firm = np.zeros(len(X), bool)
         firm = measured
+        voting = measured
         if np.any(narrow):
             # Firm: seen from both sides and where its own neighbours put it.  A wide pair can triangulate
             # a wrong correspondence consistently (Remove Bad 3D Points drops it later), and one such
@@ -964,13 +1012,21 @@ class FrameTracker:
             firm = measured & ~narrow & ~(dev > float(self.p.max_allowed_3d_point_error))
             firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w)
             has_firm = np.all(np.isfinite(firm_pred), axis=1)
+            # A narrow point whose depth its firm neighbours put millimetres away (to be held near them below)
+            # does not vote for the points without firm neighbours: a close pair 5.5 mm deep pulled a chin dot
+            # beside it, well measured by a wide pair, 2.4 mm towards its own error.
+            along = np.abs(np.einsum("ni,ni->n", np.nan_to_num(X - firm_pred), u))
+            off_depth = narrow & has_firm & (along > OFF_DEPTH_VOTE_MM)
+            if np.any(off_depth):
+                voting = measured & ~off_depth
+                pred, _ = elastic.predict(X, voting, self.nb, self.off, weight=self.w)
             pred[has_firm] = firm_pred[has_firm]
         # How far each prediction can be off: the face's deformation over its neighbours' distance, or, where
         # they disagree about the depth (a jaw point between the still cheek and the moving chin), their spread.
         rows = np.flatnonzero(measured & np.all(np.isfinite(pred), axis=1))
         spread = np.zeros(len(X))
         if len(rows):
-            voters = np.where(has_firm[rows, None], firm[None], measured[None])
+            voters = np.where(has_firm[rows, None], firm[None], voting[None])
             spread[rows] = self._vote_spread(X, voters, rows, pred[rows], u[rows])
         Xm = X
         X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred,
