@@ -438,6 +438,7 @@ class FrameTracker:
         #    elastic prediction from the neighbours' predictions for lost points.
         tracked = np.all(np.isfinite(self.X), axis=1)
         Xp = np.where(np.isfinite(self.V), self.X + self.V, self.X)
+        speed = np.linalg.norm(np.nan_to_num(self.V, nan=0.0), axis=1)    # mm on the previous frame
         lost = ~tracked
         if np.any(lost):
             el = self._predict(Xp, tracked, lost)
@@ -484,14 +485,14 @@ class FrameTracker:
         Xa = triangulate(rig, uv_c, valid)
         err = reprojection(rig, Xa, uv_c, valid)
         anchor = (valid.sum(1) >= 2) & np.all(np.nan_to_num(err, nan=0.0) <= p.max_allowed_2d_projection_error, axis=1)
-        anchor &= ~self._doubtful_pairs(Xa, anchor, valid, Xp)
+        doubtful, el = self._doubtful_pairs(Xa, anchor, valid, Xp, speed)
+        anchor &= ~doubtful
         # Everything else starts again in pass 2 with better predictions.
         det[~anchor] = -1
         score[~anchor] = np.nan
         uv_c[~anchor] = np.nan
         taken[fd.attached(det)[2]] = True
-        # 4. Pass 2: elastic prediction from the anchors, within the Max Elastic Prediction Distance.
-        el, _ = elastic.predict(Xa, anchor, self.nb, self.off, weight=self.w)
+        # 4. Pass 2: elastic prediction from the anchors (``el``), within the Max Elastic Prediction Distance.
         X2 = np.where(anchor[:, None], Xa, np.where(np.isfinite(el), el, Xp))
         use_el = anchor | np.all(np.isfinite(el), axis=1)
         r2 = np.where(use_el, float(p.face_point_max_elastic_prediction_distance),
@@ -556,8 +557,7 @@ class FrameTracker:
         motion = np.where(tracked[:, None], Xp, np.nan)
         # So too for which view the held-out test drops, where the point moved slowly: a close pair with one
         # biased blob makes a good wide view look the worst, and nothing else tells them apart.
-        slow = np.linalg.norm(np.nan_to_num(self.V, nan=0.0), axis=1) <= MOTION_JUDGE_MM
-        judge = np.where(np.isfinite(el), el, np.where(slow[:, None], motion, np.nan))
+        judge = np.where(np.isfinite(el), el, np.where((speed <= MOTION_JUDGE_MM)[:, None], motion, np.nan))
         X, err = self._triangulate_clean(rig, uv_c, valid, src, det, judge)
         self._far_pair_view(rig, X, err, uv_c, src, np.where(np.isfinite(el), el, motion))
         self._check_patches(rig, X, err, uv_c, src, motion)
@@ -657,34 +657,37 @@ class FrameTracker:
         """This frame's triangulation weights of the views ``src[rows]``: (:func:`confidence`, elongation)."""
         return confidence(src[rows], self._prob[rows]), self._el[rows]
 
-    def _doubtful_pairs(self, Xa, anchor, valid, own):
+    def _doubtful_pairs(self, Xa, anchor, valid, own, speed):
         """Pass-1 anchors of two views that neither their neighbours nor their own motion put there.
+
+        Returns the (N,) mask of those pairs and the elastic prediction (N, 3) of every point from the
+        anchors left (``anchor`` less the mask), which pass 2 searches from.
 
         Two views meet wherever one blob lies near the other's epipolar line: a chin dot undetected in one
         camera took a blob 5.4 px from it there, and the pair met 4.6 mm off.  As an anchor it then
         predicts its neighbours (the next chin dot's prediction went 3.8 mm off, and it lost its one good
         wide view to the held-out test).  A two-view anchor farther than ``ANCHOR_PAIR_MM`` from the other
         anchors' elastic prediction and than ``ANCHOR_PAIR_MM`` plus its last frame's motion from its own
-        constant-velocity prediction (``own``) waits for pass 2 instead.  Three or more agreeing views
-        stay anchors whatever the predictions say (a jaw jerk moves them all).
+        constant-velocity prediction (``own``; ``speed``, each point's motion on the previous frame, mm)
+        waits for pass 2 instead.  Three or more agreeing views stay anchors whatever the predictions say
+        (a jaw jerk moves them all).
         """
         bad = np.zeros(self.N, bool)
         pair = anchor & (valid.sum(1) == 2)
-        if not np.any(pair):
-            return bad
         firm = anchor.copy()
+        el, _ = elastic.predict(Xa, firm, self.nb, self.off, weight=self.w)
+        if not np.any(pair):
+            return bad, el
         # A constant-velocity prediction is off by about the change of velocity: more, the faster the point.
-        speed = np.linalg.norm(np.nan_to_num(self.V, nan=0.0), axis=1)
+        far_own = ~(np.linalg.norm(Xa - own, axis=1) <= ANCHOR_PAIR_MM + speed)     # NaN (no motion): far
         for _ in range(2):      # once more without the pairs found: one may have swayed another's prediction
-            el, _ = elastic.predict(Xa, firm, self.nb, self.off, weight=self.w)
-            far_el = np.linalg.norm(Xa - el, axis=1) > ANCHOR_PAIR_MM
-            far_own = ~(np.linalg.norm(Xa - own, axis=1) <= ANCHOR_PAIR_MM + speed)     # NaN (no motion): far
-            new = pair & firm & far_el & far_own
+            new = pair & firm & far_own & (np.linalg.norm(Xa - el, axis=1) > ANCHOR_PAIR_MM)
             if not np.any(new):
                 break
             bad |= new
             firm &= ~new
-        return bad
+            el, _ = elastic.predict(Xa, firm, self.nb, self.off, weight=self.w)
+        return bad, el
 
     def _first_two(self, Pi, Si, Dd):
         """Of :meth:`_search`'s rows (k=2): each slot's first row, its distance and the second's (inf none)."""
