@@ -14,7 +14,7 @@ import numpy as np
 
 from scipy.ndimage import map_coordinates
 
-from carapost.core.blobs.edges import (ARC_MOVE, ARCS, COARSE, FLAT, FLAT_MINOR, INLIER, INNER, INSIDE, MAX_MOVE,
+from carapost.core.blobs.edges import (AGAIN, AGAIN_SHRINK, ARC_MOVE, ARCS, COARSE, FLAT, FLAT_MINOR, INLIER, INNER, INSIDE, MAX_MOVE,
                                        MAX_SCATTER, MERGED, MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
@@ -234,6 +234,30 @@ def _fit_arcs(u, v, good, scale, b):
     return dx, dy, clean, spread, n
 
 
+def _refine_once(gx, gy, x, y, a, b, th, start, flat_img):
+    """Step 5 once from the ellipses ``(x, y, a, b, th)``: new centres and each one's share of the edge's move."""
+    x, y = x.copy(), y.copy()
+    dx, dy, clean, spread, n = _fit_edges(gx, gy, x, y, a, b, th, flat_img)
+    shift = np.hypot(dx, dy)
+    # The edge points' scatter over the square root of their number: the standard error of the fit's
+    # centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
+    noise = np.where(clean, TRUST * spread / np.sqrt(np.maximum(n, 1.0)), 1.0)
+    share = np.where(clean, np.clip((shift - noise) / np.maximum(noise, 1e-9), 0.0, 1.0), 0.0)
+    x += dx * share
+    y += dy * share
+    if start is not None:
+        sx, sy, sr = start
+        retry = np.flatnonzero(~clean & (sr > 0) & (a > MERGED * sr))
+        if len(retry):
+            r0 = np.maximum(sr[retry], 1.0)
+            dx2, dy2, clean2, _s, _n = _fit_edges(gx, gy, sx[retry], sy[retry], r0, r0, np.zeros(len(retry)), flat_img,
+                                                  mode=2)
+            got = retry[clean2]
+            x[got], y[got] = sx[got] + dx2[clean2], sy[got] + dy2[clean2]
+            share[got] = 1.0
+    return x, y, share
+
+
 def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False):
     """:func:`carapost.core.blobs.edges.refine_centres`, in numpy (same arguments and results)."""
     x = np.asarray(x, float).copy()
@@ -245,22 +269,13 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, fl
     th = np.deg2rad(np.asarray(angle, float))
     gx, gy = _gradients(bright)
     flat_img = bright if flat else None
-    dx, dy, clean, spread, n = _fit_edges(gx, gy, x, y, a, b, th, flat_img)
-    shift = np.hypot(dx, dy)
-    # The edge points' scatter over the square root of their number: the standard error of the fit's
-    # centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
-    noise = np.where(clean, TRUST * spread / np.sqrt(np.maximum(n, 1.0)), 1.0)
-    share = np.where(clean, np.clip((shift - noise) / np.maximum(noise, 1e-9), 0.0, 1.0), 0.0)
-    x += dx * share
-    y += dy * share
-    if start is not None:
-        sx, sy, sr = (np.asarray(v, float) for v in start)
-        retry = np.flatnonzero(~clean & (sr > 0) & (a > MERGED * sr))
-        if len(retry):
-            r0 = np.maximum(sr[retry], 1.0)
-            dx2, dy2, clean2, _s, _n = _fit_edges(gx, gy, sx[retry], sy[retry], r0, r0, np.zeros(len(retry)), flat_img,
-                                                  mode=2)
-            got = retry[clean2]
-            x[got], y[got] = sx[got] + dx2[clean2], sy[got] + dy2[clean2]
-            share[got] = 1.0
-    return x, y, share > 0
+    start = None if start is None else tuple(np.asarray(v, float) for v in start)
+    x1, y1, share = _refine_once(gx, gy, x, y, a, b, th, start, flat_img)
+    moved = np.hypot(x1 - x, y1 - y)
+    again = np.flatnonzero((share > 0) & (moved > AGAIN)) if AGAIN > 0 else np.zeros(0, int)
+    if len(again):
+        sub = None if start is None else tuple(v[again] for v in start)
+        x2, y2, s2 = _refine_once(gx, gy, x1[again], y1[again], a[again], b[again], th[again], sub, flat_img)
+        take = (s2 > 0) & (np.hypot(x2 - x1[again], y2 - y1[again]) < AGAIN_SHRINK * moved[again])
+        x1[again[take]], y1[again[take]] = x2[take], y2[take]
+    return x1, y1, share > 0

@@ -55,6 +55,28 @@ def test_refine_moves_a_wrong_centre_onto_the_edge_and_leaves_a_right_one():
     assert np.hypot(x2[0] - c[0], y2[0] - c[1]) < 0.05
 
 
+def test_a_centre_the_edge_moves_far_is_measured_from_the_edge_again(monkeypatch):
+    """A dot measured together with the band beside it: the first ellipse is too large and 1.2-2 px off, so
+    the rays cut the dot's edge obliquely and one pass leaves the centre 0.2-0.4 px off; a second pass from
+    the edge's centre (``AGAIN``) takes it to ~0.1 px.  The kernel does what the numpy reference does."""
+    import blob_edges_reference as reference
+
+    one, two = [], []
+    for off in ((1.2, 0.2), (1.6, -0.4), (2.0, 0.5)):
+        img, c = _dot_beside_a_band(np.random.default_rng(1), gap=2.0)
+        bright = cv2.bitwise_not(img)
+        args = ([c[0] + off[0]], [c[1] + off[1]], [12.0], [7.0], [20.0])
+        x, y, used = refine_centres(bright, *args)
+        rx, ry, _ = reference.refine_centres(bright, *args)
+        assert used[0] and abs(x[0] - rx[0]) < 1e-3 and abs(y[0] - ry[0]) < 1e-3
+        two.append(np.hypot(x[0] - c[0], y[0] - c[1]))
+        monkeypatch.setattr(reference, "AGAIN", 0.0)
+        ox, oy, _ = reference.refine_centres(bright, *args)
+        monkeypatch.undo()
+        one.append(np.hypot(ox[0] - c[0], oy[0] - c[1]))
+    assert max(two) < 0.12 and min(one) > 0.2, (one, two)
+
+
 def test_no_clean_edge_keeps_the_first_centre():
     flat = np.full((40, 40), 90, np.uint8)
     x, y, used = refine_centres(flat, [20.3], [19.6], [8.0], [8.0], [0.0])

@@ -123,6 +123,23 @@ def assert_close(a, b, tol=1e-2):
     np.testing.assert_allclose(np.asarray(a, float), np.asarray(b, float), atol=tol)
 
 
+def _press(widget, pos, button, mods) -> None:
+    """Press ``button`` at ``pos`` (widget coordinates) straight to ``widget``, as the drags' moves are sent.
+
+    Through the window system's queue (``QTest.mousePress``) the press could arrive after the moves on a
+    loaded machine: the scene then saw moves with no press, then a click, and cleared the selection (seen
+    once in a full test run).
+    """
+    from PySide6.QtCore import QEvent, QPointF
+    from PySide6.QtGui import QMouseEvent
+    from PySide6.QtWidgets import QApplication
+
+    local = QPointF(pos)
+    QApplication.sendEvent(widget, QMouseEvent(QEvent.Type.MouseButtonPress, local,
+                                               QPointF(widget.mapToGlobal(local.toPoint())), button, button, mods))
+    QApplication.processEvents()
+
+
 def drag_raw(qtbot, view, a, b, mods=Qt.KeyboardModifier.NoModifier, button=Qt.MouseButton.LeftButton,
              via=(), steps: int = 4):
     """Drag in a view from raw pixel ``a`` to ``b`` (through the raw points ``via``), holding ``mods``."""
@@ -136,10 +153,7 @@ def drag_raw(qtbot, view, a, b, mods=Qt.KeyboardModifier.NoModifier, button=Qt.M
     pts = []
     for (x0, y0), (x1, y1) in zip(corners, corners[1:]):
         pts += [(x0 + (x1 - x0) * t, y0 + (y1 - y0) * t) for t in np.linspace(0, 1, steps + 1)[1:]]
-    QTest.mousePress(vp, button, mods, view.raw_to_viewport(*a))
-    # The press goes through the window system's queue, the moves below straight to the viewport: let the
-    # press arrive first, or the scene sees moves with no press, then a click (the selection cleared).
-    QApplication.processEvents()
+    _press(vp, view.raw_to_viewport(*a), button, mods)
     for q in pts:
         # QTest.mouseMove sends no modifiers; a user holding Shift does.
         local = QPointF(view.raw_to_viewport(*q))
@@ -161,7 +175,7 @@ def drag_widget(widget, points, mods=Qt.KeyboardModifier.NoModifier, button=Qt.M
     from PySide6.QtWidgets import QApplication
 
     pts = [QPoint(int(round(x)), int(round(y))) for x, y in points]
-    QTest.mousePress(widget, button, mods, pts[0])
+    _press(widget, pts[0], button, mods)
     for q in pts[1:]:
         local = QPointF(q)
         ev = QMouseEvent(QEvent.Type.MouseMove, local, QPointF(widget.mapToGlobal(q)), Qt.MouseButton.NoButton,

@@ -59,6 +59,9 @@ MAX_MOVE = 1.0
 #: (from every pixel's intensity, close to the Cramer-Rao bound on a clean dot) is kept; from there
 #: to twice that the centre moves over to the edge's gradually.
 TRUST = 8.0
+#: A centre the edge moved further than this (px) is measured from its edge once more, from there.
+AGAIN = 0.8
+AGAIN_SHRINK = 1.0
 #: A blob measured this many times its candidate's radius (semi-major axis) may be a dot measured
 #: together with a darker region it touches.
 MERGED = 1.8
@@ -666,31 +669,41 @@ def _fit_arcs(u, v, peak, lim, a, b, buf):
 
 
 @njit(**JIT)
+def _refine_one(img, x, y, a, b, th, sx, sy, sr, buf, box, flat):
+    """Step 5 for one blob (ellipse ``(x, y, a, b, th)``, candidate ``(sx, sy, sr)``): ``(x, y, share)``."""
+    dx, dy, clean, spread, n = _fit_edge(img, x, y, a, b, th, buf, box, True, 1 if flat else 0)
+    if clean:
+        # The edge points' scatter over the square root of their number: the standard error of the
+        # fit's centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
+        noise = TRUST * spread / math.sqrt(max(n, 1.0))
+        s = min(max((math.hypot(dx, dy) - noise) / max(noise, 1e-9), 0.0), 1.0)
+        return x + dx * s, y + dy * s, s
+    if sr > 0.0 and a > MERGED * sr:
+        # Measured much larger than its candidate and no clean edge: the dot was measured together
+        # with a darker region it touches.  Its own edge, from the candidate (inside the dot).
+        r0 = max(sr, 1.0)
+        dx, dy, clean, spread, n = _fit_edge(img, sx, sy, r0, r0, 0.0, buf, box, True, 2 if flat else 0)
+        if clean:
+            return sx + dx, sy + dy, 1.0
+    return x, y, 0.0
+
+
+@njit(**JIT)
 def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share, flat):
     rmax = 1.0
     for i in range(len(x)):
         rmax = max(rmax, major[i] / 2.0, minor[i] / 2.0, sr[i])
     buf, box = _scratch(rmax)
     for i in range(len(x)):
-        a, b = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5)
-        ox[i], oy[i], share[i] = x[i], y[i], 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, x[i], y[i], a, b, math.radians(angle[i]), buf, box, True,
-                                             1 if flat else 0)
-        if clean:
-            # The edge points' scatter over the square root of their number: the standard error of the
-            # fit's centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
-            noise = TRUST * spread / math.sqrt(max(n, 1.0))
-            s = min(max((math.hypot(dx, dy) - noise) / max(noise, 1e-9), 0.0), 1.0)
-            ox[i] += dx * s
-            oy[i] += dy * s
-            share[i] = s
-        elif sr[i] > 0.0 and a > MERGED * sr[i]:
-            # Measured much larger than its candidate and no clean edge: the dot was measured together
-            # with a darker region it touches.  Its own edge, from the candidate (inside the dot).
-            r0 = max(sr[i], 1.0)
-            dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, box, True, 2 if flat else 0)
-            if clean:
-                ox[i], oy[i], share[i] = sx[i] + dx, sy[i] + dy, 1.0
+        a, b, th = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5), math.radians(angle[i])
+        ox[i], oy[i], share[i] = _refine_one(img, x[i], y[i], a, b, th, sx[i], sy[i], sr[i], buf, box, flat)
+        if AGAIN > 0.0 and share[i] > 0.0 and math.hypot(ox[i] - x[i], oy[i] - y[i]) > AGAIN:
+            # The edge moved the centre far: the rays were normal to an ellipse off the dot (measured with
+            # what it touches) and cut its edge obliquely.  Once more, from the edge's centre.
+            nx, ny, s = _refine_one(img, ox[i], oy[i], a, b, th, sx[i], sy[i], sr[i], buf, box, flat)
+            # Only a pass that converges: one that moves further than the first ran off to something else.
+            if s > 0.0 and math.hypot(nx - ox[i], ny - oy[i]) < AGAIN_SHRINK * math.hypot(ox[i] - x[i], oy[i] - y[i]):
+                ox[i], oy[i] = nx, ny
 
 
 def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False):
