@@ -14,8 +14,8 @@ import numpy as np
 
 from scipy.ndimage import map_coordinates
 
-from carapost.core.blobs.edges import (AGAIN, AGAIN_SHRINK, ARC_MOVE, ARCS, COARSE, FLAT, FLAT_MINOR, INLIER, INNER, INSIDE, MAX_MOVE,
-                                       MAX_SCATTER, MERGED, MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK)
+from carapost.core.blobs.edges import (AGAIN, AGAIN_SHRINK, ARC_MOVE, ARCS, COARSE, FLAT, FLAT_MINOR, INLIER, INNER,
+                                       INSIDE, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
 _PHI = np.linspace(0.0, 2.0 * np.pi, RAYS, endpoint=False)

@@ -24,7 +24,10 @@ is measured again here from its outline (docs/blobs.md, step 5):
 A blob keeps its first centre when the edge does not make a clean ellipse (too
 few rays left, points scattered more than ``MAX_SCATTER`` px about the fit, or a
 centre more than ``MAX_MOVE`` minor semi-axes away: a different shape was found)
-and when the move is within the fit's own noise (``TRUST``).
+and when the move is within the fit's own noise (``TRUST``).  A centre moved
+more than ``AGAIN`` px was measured from an ellipse off the dot, whose normals
+cut its edge obliquely: the step runs once more from there, and its answer is
+kept when it converges (``AGAIN_SHRINK``).
 
 Each blob is one compiled loop (numba, the options of :mod:`.measure_kernel`):
 the gradients of the few hundred pixels its rays cross, the rays, the fits.
@@ -59,7 +62,8 @@ MAX_MOVE = 1.0
 #: (from every pixel's intensity, close to the Cramer-Rao bound on a clean dot) is kept; from there
 #: to twice that the centre moves over to the edge's gradually.
 TRUST = 8.0
-#: A centre the edge moved further than this (px) is measured from its edge once more, from there.
+#: A centre the edge moved further than this (px) is measured from its edge once more, from there; the
+#: second answer is kept when it moves the centre less than AGAIN_SHRINK times the first move (it converges).
 AGAIN = 0.8
 AGAIN_SHRINK = 1.0
 #: A blob measured this many times its candidate's radius (semi-major axis) may be a dot measured
@@ -700,9 +704,10 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, ox, oy, share, flat):
         if AGAIN > 0.0 and share[i] > 0.0 and math.hypot(ox[i] - x[i], oy[i] - y[i]) > AGAIN:
             # The edge moved the centre far: the rays were normal to an ellipse off the dot (measured with
             # what it touches) and cut its edge obliquely.  Once more, from the edge's centre.
+            first = math.hypot(ox[i] - x[i], oy[i] - y[i])
             nx, ny, s = _refine_one(img, ox[i], oy[i], a, b, th, sx[i], sy[i], sr[i], buf, box, flat)
             # Only a pass that converges: one that moves further than the first ran off to something else.
-            if s > 0.0 and math.hypot(nx - ox[i], ny - oy[i]) < AGAIN_SHRINK * math.hypot(ox[i] - x[i], oy[i] - y[i]):
+            if s > 0.0 and math.hypot(nx - ox[i], ny - oy[i]) < AGAIN_SHRINK * first:
                 ox[i], oy[i] = nx, ny
 
 
