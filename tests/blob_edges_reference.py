@@ -234,14 +234,14 @@ def _fit_arcs(u, v, good, scale, b):
     return dx, dy, clean, spread, n
 
 
-def _refine_once(gx, gy, x, y, a, b, th, start, flat_img):
+def _refine_once(gx, gy, x, y, a, b, th, start, flat_img, trust):
     """Step 5 once from the ellipses ``(x, y, a, b, th)``: new centres and each one's share of the edge's move."""
     x, y = x.copy(), y.copy()
     dx, dy, clean, spread, n = _fit_edges(gx, gy, x, y, a, b, th, flat_img)
     shift = np.hypot(dx, dy)
     # The edge points' scatter over the square root of their number: the standard error of the fit's
     # centre, were the rays independent (neighbouring rays share pixels, so TRUST is large).
-    noise = np.where(clean, TRUST * spread / np.sqrt(np.maximum(n, 1.0)), 1.0)
+    noise = np.where(clean, trust * spread / np.sqrt(np.maximum(n, 1.0)), 1.0)
     share = np.where(clean, np.clip((shift - noise) / np.maximum(noise, 1e-9), 0.0, 1.0), 0.0)
     x += dx * share
     y += dy * share
@@ -258,7 +258,7 @@ def _refine_once(gx, gy, x, y, a, b, th, start, flat_img):
     return x, y, share
 
 
-def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False):
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False, trust=None):
     """:func:`carapost.core.blobs.edges.refine_centres`, in numpy (same arguments and results)."""
     x = np.asarray(x, float).copy()
     y = np.asarray(y, float).copy()
@@ -270,12 +270,14 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, fl
     gx, gy = _gradients(bright)
     flat_img = bright if flat else None
     start = None if start is None else tuple(np.asarray(v, float) for v in start)
-    x1, y1, share = _refine_once(gx, gy, x, y, a, b, th, start, flat_img)
+    trust = np.full(len(x), TRUST) if trust is None else np.asarray(trust, float)
+    x1, y1, share = _refine_once(gx, gy, x, y, a, b, th, start, flat_img, trust)
     moved = np.hypot(x1 - x, y1 - y)
     again = np.flatnonzero((share > 0) & (moved > AGAIN)) if AGAIN > 0 else np.zeros(0, int)
     if len(again):
         sub = None if start is None else tuple(v[again] for v in start)
-        x2, y2, s2 = _refine_once(gx, gy, x1[again], y1[again], a[again], b[again], th[again], sub, flat_img)
+        x2, y2, s2 = _refine_once(gx, gy, x1[again], y1[again], a[again], b[again], th[again], sub, flat_img,
+                                  trust[again])
         take = (s2 > 0) & (np.hypot(x2 - x1[again], y2 - y1[again]) < AGAIN_SHRINK * moved[again])
         x1[again[take]], y1[again[take]] = x2[take], y2[take]
     return x1, y1, share > 0
