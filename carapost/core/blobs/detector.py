@@ -419,10 +419,13 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
 TEXTURED = 1.5
 
 
+_BORDER, _CNR = FIT_FEATURE_NAMES.index("border_std"), FIT_FEATURE_NAMES.index("log_cnr")
+
+
 def _trust(feats: np.ndarray) -> np.ndarray:
     """Step 5's trust in the first centre (:data:`.edges.TRUST`) of fits with stage-2 features ``feats``."""
     # border_std / contrast times contrast / noise: the ring's residual over the image's noise.
-    texture = feats[:, 6].astype(np.float64) * np.exp(feats[:, 1].astype(np.float64))
+    texture = feats[:, _BORDER].astype(np.float64) * np.exp(feats[:, _CNR].astype(np.float64))
     return np.where(texture > TEXTURED, TRUST_TEXTURED, TRUST)
 
 
