@@ -707,10 +707,10 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, trust, ox, oy, share, fl
         a, b, th = max(major[i] / 2.0, 0.5), max(minor[i] / 2.0, 0.5), math.radians(angle[i])
         ox[i], oy[i], share[i] = _refine_one(img, x[i], y[i], a, b, th, sx[i], sy[i], sr[i], buf, box, flat,
                                              trust[i])
-        if AGAIN > 0.0 and share[i] > 0.0 and math.hypot(ox[i] - x[i], oy[i] - y[i]) > AGAIN:
+        first = math.hypot(ox[i] - x[i], oy[i] - y[i])
+        if AGAIN > 0.0 and share[i] > 0.0 and first > AGAIN:
             # The edge moved the centre far: the rays were normal to an ellipse off the dot (measured with
             # what it touches) and cut its edge obliquely.  Once more, from the edge's centre.
-            first = math.hypot(ox[i] - x[i], oy[i] - y[i])
             nx, ny, s = _refine_one(img, ox[i], oy[i], a, b, th, sx[i], sy[i], sr[i], buf, box, flat, trust[i])
             # Only a pass that converges: one that moves further than the first ran off to something else.
             if s > 0.0 and math.hypot(nx - ox[i], ny - oy[i]) < AGAIN_SHRINK * first:
