@@ -14,8 +14,9 @@ import numpy as np
 
 from scipy.ndimage import map_coordinates
 
-from carapost.core.blobs.edges import (AGAIN, AGAIN_SHRINK, ARC_MOVE, ARCS, COARSE, FLAT, FLAT_MINOR, INLIER, INNER,
-                                       INSIDE, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS, RAYS, REACH, STEP, TRUST, WEAK)
+from carapost.core.blobs.edges import (AGAIN, AGAIN_SHRINK, ALONG_MAX, ALONG_ROUND, ALONG_THIN, ARC_MOVE, ARCS, COARSE,
+                                       FLAT, FLAT_MINOR, INLIER, INNER, INSIDE, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS,
+                                       RAYS, REACH, STEP, TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
 _PHI = np.linspace(0.0, 2.0 * np.pi, RAYS, endpoint=False)
@@ -258,7 +259,8 @@ def _refine_once(gx, gy, x, y, a, b, th, start, flat_img, trust):
     return x, y, share
 
 
-def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False, trust=None):
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False, trust=None,
+                   along=False):
     """:func:`carapost.core.blobs.edges.refine_centres`, in numpy (same arguments and results)."""
     x = np.asarray(x, float).copy()
     y = np.asarray(y, float).copy()
@@ -280,4 +282,10 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, fl
                                   trust[again])
         take = (s2 > 0) & (np.hypot(x2 - x1[again], y2 - y1[again]) < AGAIN_SHRINK * moved[again])
         x1[again[take]], y1[again[take]] = x2[take], y2[take]
+    if along:
+        # The first centre's weight along the major axis of an elongated blob the edge moved.
+        ratio = np.asarray(minor, float) / np.maximum(np.asarray(major, float), 1e-9)
+        w = ALONG_MAX * np.clip((ALONG_ROUND - ratio) / (ALONG_ROUND - ALONG_THIN), 0.0, 1.0) * (share > 0)
+        t = w * ((x - x1) * np.cos(th) + (y - y1) * np.sin(th))
+        x1, y1 = x1 + t * np.cos(th), y1 + t * np.sin(th)
     return x1, y1, share > 0

@@ -479,7 +479,7 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     rec["x"][at], rec["y"][at], _ = refine_centres(bright, fitted.x[again], fitted.y[again], fitted.major[again],
                                                    fitted.minor[again], fitted.angle[again],
                                                    tuple(v[again] for v in fitted.start), flat=not white,
-                                                   trust=_trust(fitted.feats[again]))
+                                                   trust=_trust(fitted.feats[again]), along=True)
     rec["major"], rec["minor"], rec["angle"] = fitted.major[keep], fitted.minor[keep], fitted.angle[keep]
     rec["score"] = prob[keep]
     rec["color"] = COLOR_WHITE if white else COLOR_BLACK

@@ -74,6 +74,13 @@ AGAIN_SHRINK = 1.0
 #: A blob measured this many times its candidate's radius (semi-major axis) may be a dot measured
 #: together with a darker region it touches.
 MERGED = 1.8
+#: Along the major axis of an elongated blob the edge's centre is averaged with the first (intensity)
+#: centre (``refine_centres(along=True)``): the first centre's weight is ALONG_MAX at a minor/major ratio
+#: of ALONG_THIN or less and falls linearly to 0 at ALONG_ROUND.  The ends of an oblique dot's ellipse are
+#: sharp beside the blur, and shading and texture move them: along that axis the edge is no better than
+#: the intensity, and their errors are independent enough that the mean beats either (docs/blobs.md,
+#: "Session 19: an oblique dot's centre along its major axis").
+ALONG_MAX, ALONG_THIN, ALONG_ROUND = 0.6, 0.3, 0.7
 #: Robust fitting rounds.
 ROUNDS = 3
 #: Arcs tried when the whole edge is not a clean ellipse (0: none), and the distance within which an
@@ -698,7 +705,14 @@ def _refine_one(img, x, y, a, b, th, sx, sy, sr, buf, box, flat, trust):
 
 
 @njit(**JIT)
-def _refine(img, x, y, major, minor, angle, sx, sy, sr, trust, ox, oy, share, flat):
+def _along_weight(major, minor):
+    """The first centre's weight along the major axis (:data:`ALONG_MAX`)."""
+    ratio = minor / max(major, 1e-9)
+    return ALONG_MAX * min(max((ALONG_ROUND - ratio) / (ALONG_ROUND - ALONG_THIN), 0.0), 1.0)
+
+
+@njit(**JIT)
+def _refine(img, x, y, major, minor, angle, sx, sy, sr, trust, ox, oy, share, flat, along):
     rmax = 1.0
     for i in range(len(x)):
         rmax = max(rmax, major[i] / 2.0, minor[i] / 2.0, sr[i])
@@ -715,9 +729,16 @@ def _refine(img, x, y, major, minor, angle, sx, sy, sr, trust, ox, oy, share, fl
             # Only a pass that converges: one that moves further than the first ran off to something else.
             if s > 0.0 and math.hypot(nx - ox[i], ny - oy[i]) < AGAIN_SHRINK * first:
                 ox[i], oy[i] = nx, ny
+        if along and share[i] > 0.0:
+            w = _along_weight(major[i], minor[i])
+            c, sn = math.cos(th), math.sin(th)
+            t = w * ((x[i] - ox[i]) * c + (y[i] - oy[i]) * sn)
+            ox[i] += t * c
+            oy[i] += t * sn
 
 
-def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False, trust=None):
+def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, flat=False, trust=None,
+                   along=False):
     """Centres of blobs measured again from their edges.
 
     Parameters
@@ -739,6 +760,9 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, fl
     trust : array_like, optional
         Per blob, how many standard errors of the edge fit the edge's centre must
         be away before the blob moves to it (``TRUST`` for every blob by default).
+    along : bool
+        Along the major axis of an elongated blob, average the edge's centre with
+        the first one (:data:`ALONG_MAX`) where the edge moved it.
 
     Returns
     -------
@@ -755,7 +779,7 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, fl
     args.append(np.full(n, TRUST) if trust is None else np.ascontiguousarray(np.asarray(trust, float)).reshape(-1))
     ox, oy, share = np.empty(n), np.empty(n), np.empty(n)
     if n:
-        _refine(np.ascontiguousarray(bright), *args, ox, oy, share, bool(flat))
+        _refine(np.ascontiguousarray(bright), *args, ox, oy, share, bool(flat), bool(along))
     return ox, oy, share > 0
 
 
