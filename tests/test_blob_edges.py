@@ -131,6 +131,8 @@ def test_an_oblique_dots_centre_along_its_major_axis_averages_the_edge_and_the_i
     def errors(frames, along):
         """Per (frame, marker) found within 1.5 px: error along and across the major axis, minor/major."""
         monkeypatch.setattr(detector, "refine_centres", lambda *a, **kw: refine(*a, **{**kw, "along": along}))
+        # Step 5 of the ellipses found from a candidate's edge (its own test, below) calls refine_centres too.
+        monkeypatch.setattr(detector, "_refine_edge_ellipses", lambda bright, x, y, *a: (x, y))
         out = {}
         for f, s in enumerate(frames):
             r = detector.detect(s.image, white=white)
@@ -154,6 +156,43 @@ def test_an_oblique_dots_centre_along_its_major_axis_averages_the_edge_and_the_i
     assert abs(rms(a[thin, 1]) - rms(b[thin, 1])) < 1e-3, (rms(a[thin, 1]), rms(b[thin, 1]))
     assert rms(a[:, :2]) < rms(b[:, :2])
     assert np.allclose(a[round_, :2], b[round_, :2])
+
+
+def test_step_5_measures_the_ellipses_found_from_a_candidates_edge_along_their_own_normals(monkeypatch):
+    """An ellipse found from its candidate's edge (a dot the intensity fit drew off into what it touches) was
+    where the candidate's circle of rays put it: those rays cut an elongated or off-centre dot's edge obliquely.
+    Step 5 along the ellipse's own normals moves it when the move is short and a second pass confirms it.
+    On the white benchmark frames (seeds 0-2) the from-edge hits' centre RMS falls by over 15 % and more of them
+    improve than worsen; without the confirmation more of them end over 0.1 px worse (a dot whose step 5 ran
+    onto the edge of what it touches)."""
+    from scipy.spatial import cKDTree
+
+    from carapost.core.blobs import detector
+    from carapost.core.blobs.synth import sample_frames
+
+    frames = [f for seed in (0, 1, 2) for f in sample_frames(True, seed=seed, frames=3)]
+
+    def errors(**patch):
+        for k, v in patch.items():
+            monkeypatch.setattr(detector, k, v)
+        out = {}
+        for i, s in enumerate(frames):
+            r = detector.detect(s.image, white=True)
+            d, _ = cKDTree(np.stack([r["x"], r["y"]], 1)).query(s.centres)
+            out.update({(i, m): d[m] for m in np.flatnonzero(d <= 1.5)})
+        monkeypatch.undo()
+        return out
+
+    before = errors(_refine_edge_ellipses=lambda bright, x, y, *a: (x, y))
+    after, unconfirmed = errors(), errors(EDGE_CONVERGE=np.inf)
+    keys = [k for k in before if k in after and k in unconfirmed
+            and (abs(after[k] - before[k]) > 1e-6 or abs(unconfirmed[k] - before[k]) > 1e-6)]
+    b, a, u = (np.array([e[k] for k in keys]) for e in (before, after, unconfirmed))
+    assert len(keys) > 20 and len(after) >= len(before) - 1
+    rms = lambda v: float(np.sqrt(np.mean(v ** 2)))
+    assert rms(a) < 0.85 * rms(b), (rms(a), rms(b))
+    assert np.count_nonzero(a < b - 1e-6) > 1.5 * np.count_nonzero(a > b + 1e-6)
+    assert np.count_nonzero(u - b > 0.1) > np.count_nonzero(a - b > 0.1)
 
 
 def test_no_clean_edge_keeps_the_first_centre():

@@ -429,6 +429,32 @@ def _trust(feats: np.ndarray) -> np.ndarray:
     return np.where(texture > TEXTURED, TRUST_TEXTURED, TRUST)
 
 
+#: An ellipse found from its candidate's edge moves to step 5's centre (measured along its own normals) when
+#: that is at most EDGE_MOVE px away and step 5 run again from there moves it less than EDGE_CONVERGE times as
+#: far (docs/blobs.md, "Session 19: step 5 on the ellipses found from a candidate's edge").
+EDGE_MOVE, EDGE_CONVERGE = 1.0, 0.5
+
+
+def _refine_edge_ellipses(bright, x, y, major, minor, angle, flat: bool):
+    """Step 5 for ellipses found from their candidate's edge (:func:`_rescue_drifted`): their new centres.
+
+    The rays from a candidate's circle cut an elongated or off-centre dot's edge obliquely and reach
+    its ends only in part; along the found ellipse's own normals the edge is sampled whole.  Such an
+    ellipse is itself an edge fit, so the edge is trusted as on textured skin.  A move is taken only
+    when short and when a second pass from the new centre confirms it: a move onto the edge of what
+    the dot touches (brow hair, a lip band) does not settle there.
+    """
+    trust = np.full(len(x), TRUST_TEXTURED)
+    nx, ny, used = refine_centres(bright, x, y, major, minor, angle, flat=flat, trust=trust)
+    move = np.hypot(nx - x, ny - y)
+    take = used & (move <= EDGE_MOVE)
+    if take.any():
+        mx, my, again = refine_centres(bright, nx[take], ny[take], major[take], minor[take], angle[take], flat=flat,
+                                       trust=np.zeros(int(take.sum())))
+        take[take] = again & (np.hypot(mx - nx[take], my - ny[take]) < EDGE_CONVERGE * move[take])
+    return np.where(take, nx, x), np.where(take, ny, y)
+
+
 def detect(image, white: bool = False, threshold: float = 0.4, min_major: float = 4.0, max_major: float = 50.0,
            model: BlobModel | None = None) -> np.ndarray:
     """Detect blobs of one colour in one image.
@@ -480,6 +506,11 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
                                                    fitted.minor[again], fitted.angle[again],
                                                    tuple(v[again] for v in fitted.start), flat=not white,
                                                    trust=_trust(fitted.feats[again]), along=True)
+    if fitted.from_edge is not None and fitted.from_edge[keep].any():
+        edge = keep[fitted.from_edge[keep]]
+        at = np.searchsorted(keep, edge)
+        rec["x"][at], rec["y"][at] = _refine_edge_ellipses(bright, fitted.x[edge], fitted.y[edge], fitted.major[edge],
+                                                           fitted.minor[edge], fitted.angle[edge], not white)
     rec["major"], rec["minor"], rec["angle"] = fitted.major[keep], fitted.minor[keep], fitted.angle[keep]
     rec["score"] = prob[keep]
     rec["color"] = COLOR_WHITE if white else COLOR_BLACK
