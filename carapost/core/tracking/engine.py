@@ -45,6 +45,10 @@ LAST_SEEN_FRAMES = 4
 #: Depth error (mm per px of image error) above which a point's views are too close together to
 #: fix its depth (two cameras on one side of the rig, ~10 degrees apart: ~2 mm/px; across: ~0.7).
 NARROW_MM_PER_PX = 1.2
+#: A point seen by one blob and one patch view is put at its neighbours' predicted depth only where the two
+#: views fix its depth this poorly (mm per px, :meth:`FrameTracker._patch_depth`): a patch across the rig
+#: gives a depth as good as the prediction (docs/tracking.md, "Session 19").
+PATCH_DEPTH_MM_PER_PX = NARROW_MM_PER_PX
 #: Such a point's depth may lie this far (mm) from its firmly seen neighbours' prediction: farther,
 #: and it is brought back to this distance (grazing or half-hidden dots are detected 1-3 px off).
 NARROW_DEPTH_MM = 1.0
@@ -940,7 +944,7 @@ class FrameTracker:
         err[r] = reprojection(rig, X[r], uv_c[r], v)
 
     def _patch_depth(self, rig, X, uv_c, src, measured, motion):
-        """Points seen by one blob and one patch view: on the blob's ray, at the depth their neighbours predict.
+        """Points seen by one blob and one patch view of a close pair: on the blob's ray, at the predicted depth.
 
         A patch track lands ~0.6 px from its marker (five times a blob's error: its template is
         often a half-hidden dot's last blob, and the dot's look changes under it), and beside one
@@ -951,7 +955,9 @@ class FrameTracker:
         (``motion``, NaN where unknown); without either the point stays where it was triangulated.
         Two or more patch views fix the depth from as many directions: such points keep what
         :meth:`_steady_depth` made of them, where a prediction off along the blob's ray does not
-        take them with it (docs/tracking.md, session 16).
+        take them with it (docs/tracking.md, session 16); so does one patch view in a camera across
+        the rig from the blob's, whose depth error is under :data:`PATCH_DEPTH_MM_PER_PX` mm per px
+        (session 19).
         """
         blob = src == SRC_DETECTION
         rows = np.flatnonzero(measured & (blob.sum(1) == 1) & ((src == SRC_PATCH).sum(1) == 1))
@@ -961,6 +967,10 @@ class FrameTracker:
         if motion is not None:
             pred = np.where(np.isfinite(pred), pred, motion[rows])
         ok = np.all(np.isfinite(pred), axis=1)
+        # A patch in a camera across the rig fixes the depth to ~0.7 mm per px: step 7's average with the
+        # prediction (by certainty) does better with it than the prediction alone.
+        _u, mm = depth_uncertainty(rig, X[rows], (blob | (src == SRC_PATCH))[rows])
+        ok &= mm > PATCH_DEPTH_MM_PER_PX
         rows, pred = rows[ok], pred[ok]
         if len(rows) == 0:
             return X
