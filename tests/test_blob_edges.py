@@ -112,6 +112,20 @@ def test_the_edge_is_trusted_sooner_on_textured_skin_and_not_on_a_flat_surround(
         assert (detector._trust(fitted.feats[ok]) == TRUST).all()
 
 
+def _found(frames, white):
+    """Per (frame index, marker) that ``detect`` finds within 1.5 px: the detection's record and the true centre."""
+    from scipy.spatial import cKDTree
+
+    from carapost.core.blobs import detector
+
+    out = {}
+    for f, s in enumerate(frames):
+        r = detector.detect(s.image, white=white)
+        d, j = cKDTree(np.stack([r["x"], r["y"]], 1)).query(s.centres)
+        out.update({(f, m): (r[j[m]], s.centres[m]) for m in np.flatnonzero(d <= 1.5)})
+    return out
+
+
 @pytest.mark.parametrize("white", [False, True])
 def test_an_oblique_dots_centre_along_its_major_axis_averages_the_edge_and_the_intensity(monkeypatch, white):
     """The ends of an oblique dot's ellipse are sharp beside the blur, and shading and texture move them: along
@@ -120,8 +134,6 @@ def test_an_oblique_dots_centre_along_its_major_axis_averages_the_edge_and_the_i
     frames of seeds 1 and 2 the centre error of elongated dots (minor/major under ALONG_ROUND) along their
     major axis falls (measured: black 2 %, white 14 %), across it does not change, and round dots (the
     Cramér-Rao discs) are left as they were."""
-    from scipy.spatial import cKDTree
-
     from carapost.core.blobs import detector
     from carapost.core.blobs.edges import ALONG_ROUND
     from carapost.core.blobs.synth import sample_frames
@@ -134,14 +146,11 @@ def test_an_oblique_dots_centre_along_its_major_axis_averages_the_edge_and_the_i
         # Step 5 of the ellipses found from a candidate's edge (its own test, below) calls refine_centres too.
         monkeypatch.setattr(detector, "_refine_edge_ellipses", lambda bright, x, y, *a: (x, y))
         out = {}
-        for f, s in enumerate(frames):
-            r = detector.detect(s.image, white=white)
-            d, j = cKDTree(np.stack([r["x"], r["y"]], 1)).query(s.centres)
-            for m in np.flatnonzero(d <= 1.5):
-                e = np.array([r["x"][j[m]], r["y"][j[m]]], float) - s.centres[m]
-                t = np.radians(float(r["angle"][j[m]]))
-                out[f, m] = (e[0] * np.cos(t) + e[1] * np.sin(t), -e[0] * np.sin(t) + e[1] * np.cos(t),
-                             float(r["minor"][j[m]] / r["major"][j[m]]))
+        for k, (rec, truth) in _found(frames, white).items():
+            e = np.array([rec["x"], rec["y"]], float) - truth
+            t = np.radians(float(rec["angle"]))
+            out[k] = (e[0] * np.cos(t) + e[1] * np.sin(t), -e[0] * np.sin(t) + e[1] * np.cos(t),
+                      float(rec["minor"] / rec["major"]))
         monkeypatch.undo()
         return out
 
@@ -165,21 +174,17 @@ def test_step_5_measures_the_ellipses_found_from_a_candidates_edge_along_their_o
     On the white benchmark frames (seeds 0-2) the from-edge hits' centre RMS falls by over 15 % and more of them
     improve than worsen; without the confirmation more of them end over 0.1 px worse (a dot whose step 5 ran
     onto the edge of what it touches)."""
-    from scipy.spatial import cKDTree
-
     from carapost.core.blobs import detector
     from carapost.core.blobs.synth import sample_frames
 
     frames = [f for seed in (0, 1, 2) for f in sample_frames(True, seed=seed, frames=3)]
 
     def errors(**patch):
+        """Per (frame, marker) found within 1.5 px: its distance from the truth."""
         for k, v in patch.items():
             monkeypatch.setattr(detector, k, v)
-        out = {}
-        for i, s in enumerate(frames):
-            r = detector.detect(s.image, white=True)
-            d, _ = cKDTree(np.stack([r["x"], r["y"]], 1)).query(s.centres)
-            out.update({(i, m): d[m] for m in np.flatnonzero(d <= 1.5)})
+        out = {k: float(np.hypot(rec["x"] - truth[0], rec["y"] - truth[1]))
+               for k, (rec, truth) in _found(frames, True).items()}
         monkeypatch.undo()
         return out
 

@@ -963,14 +963,16 @@ class FrameTracker:
         rows = np.flatnonzero(measured & (blob.sum(1) == 1) & ((src == SRC_PATCH).sum(1) == 1))
         if len(rows) == 0:
             return X
+        # A patch in a camera across the rig fixes the depth to ~0.7 mm per px: step 7's average with the
+        # prediction (by certainty) does better with it than the prediction alone.
+        _u, mm = depth_uncertainty(rig, X[rows], (blob | (src == SRC_PATCH))[rows])
+        rows = rows[mm > PATCH_DEPTH_MM_PER_PX]
+        if len(rows) == 0:
+            return X
         pred = self._predict(X, measured & (blob.sum(1) >= 2), rows)
         if motion is not None:
             pred = np.where(np.isfinite(pred), pred, motion[rows])
         ok = np.all(np.isfinite(pred), axis=1)
-        # A patch in a camera across the rig fixes the depth to ~0.7 mm per px: step 7's average with the
-        # prediction (by certainty) does better with it than the prediction alone.
-        _u, mm = depth_uncertainty(rig, X[rows], (blob | (src == SRC_PATCH))[rows])
-        ok &= mm > PATCH_DEPTH_MM_PER_PX
         rows, pred = rows[ok], pred[ok]
         if len(rows) == 0:
             return X
