@@ -135,6 +135,11 @@ def elongation(rec: np.ndarray) -> np.ndarray:
     return np.column_stack([np.cos(a), np.sin(a), k])
 
 
+#: A lost point comes back on two or more blob views: the patches of a point that has one are left out
+#: (their templates are from before the loss; docs/tracking.md, "Session 20").
+RETURN_ON_BLOBS = True
+
+
 def confidence(src: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
     """Triangulation weight of each view of ``src`` (N, S): :func:`blob_weight` of its detection's
     score ``prob`` (N, S) for a blob (1 without), ``PATCH_WEIGHT`` for a patch."""
@@ -548,6 +553,14 @@ class FrameTracker:
         # Patches bridge short blob dropouts (blur, a lash over the dot); a point with no blob in any
         # view for longer is no longer seen (a chin turned away): its patches drift over bare skin.
         no_blob = ~np.any(src == SRC_DETECTION, axis=1)
+        # A lost point comes back on blobs: its patches' templates are from before the loss and lag a marker
+        # that moved meanwhile.  With one blob it is put on that blob's ray (single-sensor tracking).
+        on_patches = lost & ((src == SRC_DETECTION).sum(1) < 2) & np.any(src == SRC_PATCH, axis=1)
+        if RETURN_ON_BLOBS and np.any(on_patches):
+            drop = on_patches[:, None] & (src == SRC_PATCH)
+            src[drop] = SRC_NONE
+            uv_c[drop] = np.nan
+            uv_raw[drop] = np.nan
         self.patch_run = np.where(no_blob, self.patch_run + 1, 0)
         stale = no_blob & (self.patch_run > PATCH_ONLY_FRAMES)
         if np.any(stale):
