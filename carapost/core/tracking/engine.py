@@ -549,18 +549,13 @@ class FrameTracker:
         self._el[r, s] = fd.el_all[g]
         # 5. Patch tracking where no blob matched.
         if self.images is not None and self.prev_frame is not None:
-            self._patch_track(frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det)
+            # A lost point comes back on blobs: its patches' templates are from before the loss and lag a
+            # marker that moved meanwhile.  With one blob it is put on that blob's ray (single-sensor tracking).
+            returning = lost & (valid.sum(1) < 2) if RETURN_ON_BLOBS else np.zeros(N, bool)
+            self._patch_track(frame, fd, rig, X2, r2, uv2, valid | returning[:, None], src, uv_c, uv_raw, score, det)
         # Patches bridge short blob dropouts (blur, a lash over the dot); a point with no blob in any
         # view for longer is no longer seen (a chin turned away): its patches drift over bare skin.
         no_blob = ~np.any(src == SRC_DETECTION, axis=1)
-        # A lost point comes back on blobs: its patches' templates are from before the loss and lag a marker
-        # that moved meanwhile.  With one blob it is put on that blob's ray (single-sensor tracking).
-        on_patches = lost & ((src == SRC_DETECTION).sum(1) < 2) & np.any(src == SRC_PATCH, axis=1)
-        if RETURN_ON_BLOBS and np.any(on_patches):
-            drop = on_patches[:, None] & (src == SRC_PATCH)
-            src[drop] = SRC_NONE
-            uv_c[drop] = np.nan
-            uv_raw[drop] = np.nan
         self.patch_run = np.where(no_blob, self.patch_run + 1, 0)
         stale = no_blob & (self.patch_run > PATCH_ONLY_FRAMES)
         if np.any(stale):
@@ -722,10 +717,11 @@ class FrameTracker:
         """Elastic prediction of ``rows`` only (``X``, ``available``: every point)."""
         return elastic.predict(X, available, self.nb[rows], self.off[rows], weight=self.w[rows])[0]
 
-    def _patch_track(self, frame, fd, rig, X2, r2, uv2, valid, src, uv_c, uv_raw, score, det):
+    def _patch_track(self, frame, fd, rig, X2, r2, uv2, skip, src, uv_c, uv_raw, score, det):
+        """Patch views (in place) for the recently blob-seen views not in ``skip`` (N, S)."""
         p = self.p
         recent = (self.blob_frame >= 0) & (np.abs(frame - self.blob_frame) <= PATCH_VIEW_FRAMES)
-        rows, sens = np.nonzero(~valid & recent & np.all(np.isfinite(uv2), axis=2))
+        rows, sens = np.nonzero(~skip & recent & np.all(np.isfinite(uv2), axis=2))
         if len(rows) == 0:
             return
         jobs, keep = [], []
