@@ -16,7 +16,9 @@ Backwards [Sequence].  Scored per marker (a point is the marker it is within
 - **swaps**: points ever more than 3 mm off their marker, and such samples (stricter than the issue's "a
   point that jumps onto another marker": ``onto_another_marker`` lists the swapped points that were, on
   some frame, nearer another marker than their own);
-- **rms_mm**: 3D error of the reconstructed samples within 3 mm (median too);
+- **rms_mm**: 3D error of the reconstructed samples within 3 mm (median too), and where it is
+  (:func:`error_breakdown`): by the samples' number of blob views, and the mean error vector that every
+  point shares;
 - **tracking fps**: tracking alone (images decoded on demand for patches).
 
 Targets (issue 7): coverage >= 0.995, 0 swaps, RMS <= 0.1 mm.  Run:
@@ -35,13 +37,42 @@ import numpy as np
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from carapost.core.points import ST_NONE, ST_RECONSTRUCTED  # noqa: E402
+from carapost.core.points import SRC_DETECTION, ST_NONE, ST_RECONSTRUCTED  # noqa: E402
 from carapost.core.tracking import track  # noqa: E402
 from carapost.io.frames import TakeFrames  # noqa: E402
 from carapost.sample import write_sample  # noqa: E402
 from carapost.sample.trial import faint_by_camera, initialise_from_seeds, open_sample_take, seen  # noqa: E402
 
 SWAP_MM = 3.0
+
+
+def error_breakdown(err: np.ndarray, views: np.ndarray) -> dict:
+    """Where a take's 3D error is: by how many blob views each sample had, and what all samples share.
+
+    Parameters
+    ----------
+    err : ndarray (n, 3)
+        Error vectors (mm) of the scored samples.
+    views : ndarray (n,)
+        Each sample's number of views on a blob (patch views and single-sensor samples have fewer than 2).
+
+    Returns
+    -------
+    dict
+        ``rms_by_blob_views_mm`` and ``sq_share_by_blob_views`` (keys ``"<2"``, ``"2"``, ``"3"``, ``"4+"``; a
+        group's share of the summed squared error), ``mean_error_mm`` (the mean error vector: an offset
+        common to every point, as the cameras solved from a biased brim give) and ``rms_about_mean_mm``.
+    """
+    sq = np.einsum("ni,ni->n", err, err)
+    total = float(sq.sum())
+    groups = {"<2": views < 2, "2": views == 2, "3": views == 3, "4+": views >= 4}
+    rms = {k: round(float(np.sqrt(sq[g].mean())), 4) for k, g in groups.items() if g.any()}
+    share = {k: round(float(sq[g].sum()) / total, 3) if total > 0 else 0.0 for k, g in groups.items() if g.any()}
+    mean = err.mean(axis=0) if len(err) else np.zeros(3)
+    about = err - mean
+    return {"rms_by_blob_views_mm": rms, "sq_share_by_blob_views": share,
+            "mean_error_mm": [round(float(v), 4) for v in mean],
+            "rms_about_mean_mm": round(float(np.sqrt(np.einsum("ni,ni->n", about, about).mean())), 4) if len(err) else float("nan")}
 
 
 def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) -> dict:
@@ -62,6 +93,7 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
     need = vis[:, :, :markers].sum(1) >= 2                                        # (F, M)
     covered = np.zeros_like(need)
     errs, swapped, bad, per, jumped = [], [], 0, {}, []
+    vecs, nviews = [], []
     for i, m in ident.items():
         e = np.linalg.norm(pos[i] - face[:, m], axis=1)
         ok = np.isfinite(e) & (e <= SWAP_MM)
@@ -75,7 +107,10 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
             near = np.linalg.norm(pos[i, fo, None] - face[fo], axis=2).argmin(1)
             if np.any(near != m):
                 jumped.append(f"{labels[m]}@{int(fo[np.flatnonzero(near != m)[0]])}")
-        errs.append(e[(st[i] == ST_RECONSTRUCTED) & ok])
+        keep = (st[i] == ST_RECONSTRUCTED) & ok
+        errs.append(e[keep])
+        vecs.append((pos[i] - face[:, m])[keep])
+        nviews.append((pts[i].src[:F] == SRC_DETECTION).sum(axis=1)[keep])
         if len(errs[-1]):
             per[labels[m]] = float(np.sqrt(np.mean(errs[-1] ** 2)))
     errs = np.concatenate(errs) if errs else np.zeros(0)
@@ -85,7 +120,9 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
     worst = np.argsort(-miss)[:6]
     init = np.zeros(need.shape[1], bool)
     init[list(set(ident.values()))] = True
-    return {"coverage": float(covered[need].mean()),
+    breakdown = error_breakdown(np.concatenate(vecs) if vecs else np.zeros((0, 3)),
+                                np.concatenate(nviews) if nviews else np.zeros(0, int))
+    return {**breakdown, "coverage": float(covered[need].mean()),
             "coverage_initialised": float(covered[:, init][need[:, init]].mean()),
             "swapped_points": len(swapped), "swapped_samples": bad, "swapped": swapped[:10],
             "onto_another_marker": jumped[:10],
