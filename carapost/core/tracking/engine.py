@@ -140,10 +140,12 @@ def elongation(rec: np.ndarray) -> np.ndarray:
 RETURN_ON_BLOBS = True
 
 
-def confidence(src: np.ndarray, prob: np.ndarray | None = None) -> np.ndarray:
+def confidence(src: np.ndarray, prob: np.ndarray | None = None, blob: np.ndarray | None = None) -> np.ndarray:
     """Triangulation weight of each view of ``src`` (N, S): :func:`blob_weight` of its detection's
-    score ``prob`` (N, S) for a blob (1 without), ``PATCH_WEIGHT`` for a patch."""
-    blob = 1.0 if prob is None else blob_weight(prob)
+    score ``prob`` (N, S) for a blob (1 without), ``PATCH_WEIGHT`` for a patch.  ``blob``: those blob
+    weights already worked out (``prob`` is then not used)."""
+    if blob is None:
+        blob = 1.0 if prob is None else blob_weight(prob)
     return np.where(src == SRC_PATCH, PATCH_WEIGHT, blob)
 
 
@@ -343,6 +345,7 @@ class FrameTracker:
         # Points back from a loss on two views on the last frame: kept only if this frame finds them too.
         self.tentative = np.zeros(self.N, bool)
         self._prob = np.full((self.N, self.S), np.nan)    # this frame's views' classifier scores (blobs)
+        self._blob_w = np.ones((self.N, self.S))           # ... and their triangulation weights (:func:`blob_weight`)
         self._el = round_views((self.N, self.S))            # and their elongation (:func:`elongation`)
         # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
         self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
@@ -545,6 +548,7 @@ class FrameTracker:
         uv_raw[r, s] = fd.raw_all[g]
         self._prob = np.full((N, S), np.nan)
         self._prob[r, s] = fd.prob_all[g]
+        self._blob_w = blob_weight(self._prob)        # asked for several times a frame (_view_weights)
         self._el = round_views((N, S))
         self._el[r, s] = fd.el_all[g]
         # 5. Patch tracking where no blob matched.
@@ -667,7 +671,7 @@ class FrameTracker:
     # --------------------------------------------------------------- sub-steps
     def _view_weights(self, src, rows=slice(None)):
         """This frame's triangulation weights of the views ``src[rows]``: (:func:`confidence`, elongation)."""
-        return confidence(src[rows], self._prob[rows]), self._el[rows]
+        return confidence(src[rows], blob=self._blob_w[rows]), self._el[rows]
 
     def _doubtful_pairs(self, Xa, anchor, valid, own, speed):
         """Pass-1 anchors of two views that neither their neighbours nor their own motion put there.

@@ -14,19 +14,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
-from .geometry_kernel import dlt_held_out, dlt_solve, pixel_errors, pixels, pose_residuals, pose_weighted_jacobian
+from .geometry_kernel import (dlt_held_out, dlt_solve, pixel_errors, pixels, pose_residuals, pose_weighted_jacobian,
+                              rotation_matrices)
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
     """Rotation matrices of rotation vectors ``w`` (..., 3)."""
-    th = np.linalg.norm(w, axis=-1)[..., None, None]
-    ths = np.where(th < 1e-15, 1.0, th)
-    k = w / ths[..., 0]
-    K = np.zeros(w.shape[:-1] + (3, 3))
-    K[..., 0, 1], K[..., 0, 2] = -k[..., 2], k[..., 1]
-    K[..., 1, 0], K[..., 1, 2] = k[..., 2], -k[..., 0]
-    K[..., 2, 0], K[..., 2, 1] = -k[..., 1], k[..., 0]
-    return np.eye(3) + np.sin(ths) * K + (1 - np.cos(ths)) * (K @ K)
+    w = np.asarray(w, float)
+    out = np.empty(w.shape[:-1] + (3, 3))
+    rotation_matrices(np.ascontiguousarray(w.reshape(-1, 3)), out.reshape(-1, 3, 3))
+    return out
 
 
 class RigState:
