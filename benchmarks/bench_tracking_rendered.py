@@ -70,9 +70,9 @@ def error_breakdown(err: np.ndarray, views: np.ndarray) -> dict:
     share = {k: round(float(sq[g].sum()) / total, 3) if total > 0 else 0.0 for k, g in groups.items() if g.any()}
     mean = err.mean(axis=0) if len(err) else np.zeros(3)
     about = err - mean
+    spread = round(float(np.sqrt(np.einsum("ni,ni->n", about, about).mean())), 4) if len(err) else float("nan")
     return {"rms_by_blob_views_mm": rms, "sq_share_by_blob_views": share,
-            "mean_error_mm": [round(float(v), 4) for v in mean],
-            "rms_about_mean_mm": round(float(np.sqrt(np.einsum("ni,ni->n", about, about).mean())), 4) if len(err) else float("nan")}
+            "mean_error_mm": [round(float(v), 4) for v in mean], "rms_about_mean_mm": spread}
 
 
 def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) -> dict:
