@@ -1,4 +1,4 @@
-"""A point back from a loss on two views only stands once the next frame finds it too (issue 7).
+"""A point back from a loss on two views only stands once the next frame finds it too, in both cameras (issue 7).
 
 On the white 35-marker rendered take a lower lip lost with the jaw open came back, on one frame,
 on two stray blobs 10 px off its dot whose rays met 3.5 mm from the marker: a swap of one sample.
@@ -40,6 +40,8 @@ def tracked_point(sc, m, images=None):
     ((1, 3), (), False),         # two views, gone again on the next frame: taken back
     ((1, 3), (1,), False),       # ... or seen there by one camera only (a point on its ray confirms nothing)
     ((1, 3), (1, 3), True),      # two views, and the next frame measures it again: kept
+    ((1, 3), (0, 1, 2), False),  # ... but not in one of the return's cameras: that view may be another dot's
+    ((1, 3), (0, 1, 3), True),   # both of its cameras, and one more: kept
     ((0, 1, 3), (), True),       # three views are evidence enough on their own
 ])
 def test_a_return_on_two_views_needs_the_next_frame(quiet, views_back, views_next, kept):

@@ -135,6 +135,11 @@ def elongation(rec: np.ndarray) -> np.ndarray:
     return np.column_stack([np.cos(a), np.sin(a), k])
 
 
+#: A return from a loss on two views stands only if the next frame still sees it on a blob in both of its
+#: cameras (docs/tracking.md, "Session 21").
+RETURN_FOLLOWED = True
+
+
 #: A lost point comes back on two or more blob views: the patches of a point that has one are left out
 #: (their templates are from before the loss; docs/tracking.md, "Session 20").
 RETURN_ON_BLOBS = True
@@ -344,6 +349,7 @@ class FrameTracker:
         self.patch_run = np.zeros(self.N, int)           # frames in a row without a blob in any view
         # Points back from a loss on two views on the last frame: kept only if this frame finds them too.
         self.tentative = np.zeros(self.N, bool)
+        self.tentative_views = np.zeros((self.N, self.S), bool)   # ... and the cameras they came back in
         self._prob = np.full((self.N, self.S), np.nan)    # this frame's views' classifier scores (blobs)
         self._blob_w = np.ones((self.N, self.S))           # ... and their triangulation weights (:func:`blob_weight`)
         self._el = round_views((self.N, self.S))            # and their elongation (:func:`elongation`)
@@ -624,6 +630,11 @@ class FrameTracker:
         # point that only such patches see is not measured on this frame either.
         blobs = (src == SRC_DETECTION).sum(1)
         retract = self.tentative & ((status != ST_RECONSTRUCTED) | (blobs < 2))
+        if RETURN_FOLLOWED:
+            # Confirmed by other cameras is not enough: each camera the return was seen in must still see the
+            # point on a blob (a lower lip came back on its own blob and, in another camera, on the blob of the
+            # dot beside it, 3.1 mm off; the next frame measured it from three other blobs).
+            retract |= self.tentative & np.any(self.tentative_views & (src != SRC_DETECTION), axis=1)
         status[retract & (blobs == 0)] = ST_NONE
         self.blob_frame[retract] = -1
         nothing = status == ST_NONE
@@ -639,6 +650,7 @@ class FrameTracker:
         residual = np.where(nv > 0, residual, np.nan)
         X[nothing] = np.nan
         tentative = lost & (status == ST_RECONSTRUCTED) & (valid.sum(1) == 2)
+        self.tentative_views = tentative[:, None] & (src == SRC_DETECTION)
         # 9. Carry the state to the next frame.
         have = ~nothing
         self.V = np.where(have[:, None] & tracked[:, None], X - self.X, np.nan)
