@@ -19,6 +19,8 @@ Backwards [Sequence].  Scored per marker (a point is the marker it is within
 - **rms_mm**: 3D error of the reconstructed samples within 3 mm (median too), and where it is
   (:func:`error_breakdown`): by the samples' number of blob views, and the mean error vector that every
   point shares;
+- **misses_by_detected_views**: the marker-frames coverage lacks, by how many cameras detected the marker
+  (within 1.5 px): with none the tracker cannot measure it;
 - **tracking fps**: tracking alone (images decoded on demand for patches).
 
 Targets (issue 7): coverage >= 0.995, 0 swaps, RMS <= 0.1 mm.  Run:
@@ -75,6 +77,39 @@ def error_breakdown(err: np.ndarray, views: np.ndarray) -> dict:
             "mean_error_mm": [round(float(v), 4) for v in mean], "rms_about_mean_mm": spread}
 
 
+def detected_views(records_of, uv: np.ndarray, missed: np.ndarray, visible: np.ndarray, tol: float = 1.5) -> dict:
+    """How many cameras had a detection on each missed marker-frame: whose fault a miss is.
+
+    Parameters
+    ----------
+    records_of : callable
+        ``records_of(camera, frame)`` -> that image's detections (``x``, ``y`` fields).
+    uv : ndarray (F, C, M, 2)
+        The markers' true image positions.
+    missed : ndarray (F, M) bool
+        The marker-frames the tracking lacks.
+    visible : ndarray (F, C, M) bool
+        Where each marker counts as seen.
+    tol : float
+        A detection within this many px of the marker is its.
+
+    Returns
+    -------
+    dict
+        ``{"0": n, "1": n, "2+": n}``: missed marker-frames by the number of cameras with a detection of
+        the marker.  Those with none the tracker cannot measure; those with two or more it could.
+    """
+    counts = {"0": 0, "1": 0, "2+": 0}
+    for f, m in zip(*np.nonzero(missed)):
+        n = 0
+        for c in np.flatnonzero(visible[f, :, m]):
+            rec = records_of(int(c), int(f))
+            if len(rec) and np.min(np.hypot(rec["x"] - uv[f, c, m, 0], rec["y"] - uv[f, c, m, 1])) <= tol:
+                n += 1
+        counts["0" if n == 0 else "1" if n == 1 else "2+"] += 1
+    return counts
+
+
 def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) -> dict:
     """Coverage, swaps and accuracy of the tracked face points against the truth (module docstring).
 
@@ -122,7 +157,11 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
     init[list(set(ident.values()))] = True
     breakdown = error_breakdown(np.concatenate(vecs) if vecs else np.zeros((0, 3)),
                                 np.concatenate(nviews) if nviews else np.zeros(0, int))
-    return {**breakdown, "coverage": float(covered[need].mean()),
+    lacking = np.zeros((F, need.shape[1]), bool)                                 # (F, M), frame of ``frame`` not
+    lacking[scored] = need & ~covered                                             # scored
+    misses = detected_views(lambda c, f: project.detections[c].frame(f), truth["uv"][:, :, :markers], lacking,
+                            vis[:, :, :markers])
+    return {**breakdown, "misses_by_detected_views": misses, "coverage": float(covered[need].mean()),
             "coverage_initialised": float(covered[:, init][need[:, init]].mean()),
             "swapped_points": len(swapped), "swapped_samples": bad, "swapped": swapped[:10],
             "onto_another_marker": jumped[:10],
