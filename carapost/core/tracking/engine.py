@@ -350,8 +350,7 @@ class FrameTracker:
         # Points back from a loss on two views on the last frame: kept only if this frame finds them too.
         self.tentative = np.zeros(self.N, bool)
         self.tentative_views = np.zeros((self.N, self.S), bool)   # ... and the cameras they came back in
-        self._prob = np.full((self.N, self.S), np.nan)    # this frame's views' classifier scores (blobs)
-        self._blob_w = np.ones((self.N, self.S))           # ... and their triangulation weights (:func:`blob_weight`)
+        self._blob_w = np.ones((self.N, self.S))           # this frame's blob views' weights (:func:`blob_weight`)
         self._el = round_views((self.N, self.S))            # and their elongation (:func:`elongation`)
         # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
         self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
@@ -552,9 +551,9 @@ class FrameTracker:
         r, s, g = fd.attached(det)
         uv_c[r, s] = fd.xy_all[g]
         uv_raw[r, s] = fd.raw_all[g]
-        self._prob = np.full((N, S), np.nan)
-        self._prob[r, s] = fd.prob_all[g]
-        self._blob_w = blob_weight(self._prob)        # asked for several times a frame (_view_weights)
+        # Worked out once: the triangulations ask for them several times a frame (_view_weights).
+        self._blob_w = np.ones((N, S))
+        self._blob_w[r, s] = blob_weight(fd.prob_all[g])
         self._el = round_views((N, S))
         self._el[r, s] = fd.el_all[g]
         # 5. Patch tracking where no blob matched.
