@@ -267,7 +267,7 @@ class Camera:
 
     # ------------------------------------------------------------------ distortion
 
-    def _radial(self):
+    def radial_terms(self):
         """``(cx, cy, k1, k2, k3)`` of the radial model, or None without distortion."""
         d = self.distortion
         if self.distortion_model == "VICON_RADIAL":
@@ -290,7 +290,7 @@ class Camera:
             Corrected pixel coordinates (NaN in, NaN out).
         """
         uv = _as_uv(raw_uv)
-        rad = self._radial()
+        rad = self.radial_terms()
         if rad is None:
             return uv.copy()
         cx, cy, k1, k2, k3 = rad
@@ -315,7 +315,7 @@ class Camera:
         """
         uv = _as_uv(raw_uv)
         J = np.zeros(uv.shape[:-1] + (2, 2))
-        rad = self._radial()
+        rad = self.radial_terms()
         if rad is None:
             J[..., 0, 0] = J[..., 1, 1] = 1.0
             return J
@@ -354,7 +354,7 @@ class Camera:
             never images.
         """
         uv = _as_uv(corrected_uv)
-        rad = self._radial()
+        rad = self.radial_terms()
         if rad is None:
             return uv.copy()
         cx, cy, k1, k2, k3 = rad

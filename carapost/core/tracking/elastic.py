@@ -291,3 +291,56 @@ def _votes_median(X, available, nb, off, min_neighbours):
                     m += 1
             pred[i, d] = 0.5 * (col[(c - 1) // 2] + col[c // 2])
     return pred, use, cand, count
+
+
+@njit(**JIT_EXACT)
+def along_spread(X, nb, off, weight, pred, u, rows, use_firm, firm, voting, out):
+    """Into ``out[q]``: the weighted robust spread along ``u[q]`` of row ``rows[q]``'s votes about ``pred[q]``.
+
+    A vote is ``X[j] + off[i, k]`` of neighbour ``j = nb[i, k]`` if ``j`` is in ``firm`` (where
+    ``use_firm[q]``) or ``voting`` (elsewhere) and its offset is known; its deviation is the absolute
+    component along ``u[q]`` of its distance from ``pred[q]``.  The spread is 1.4826 times the weighted
+    median deviation (the first, in increasing order, whose cumulative weight reaches half the total;
+    NaN deviations last); 0 where that is not finite or no vote has weight.
+    """
+    K = nb.shape[1]
+    dev = np.empty(K)
+    w = np.empty(K)
+    for q in range(len(rows)):
+        i = rows[q]
+        m = 0
+        total = 0.0
+        for k in range(K):
+            j = nb[i, k]
+            if j < 0 or not (firm[j] if use_firm[q] else voting[j]):
+                continue
+            if not (np.isfinite(off[i, k, 0]) and np.isfinite(off[i, k, 1]) and np.isfinite(off[i, k, 2])):
+                continue
+            d = abs((X[j, 0] + off[i, k, 0] - pred[q, 0]) * u[q, 0] + (X[j, 1] + off[i, k, 1] - pred[q, 1]) * u[q, 1]
+                    + (X[j, 2] + off[i, k, 2] - pred[q, 2]) * u[q, 2])
+            wk = weight[i, k]
+            # Insertion sort by deviation, NaN last, equal ones in neighbour order.
+            p = m
+            while p > 0 and (dev[p - 1] > d or (np.isnan(dev[p - 1]) and not np.isnan(d))):
+                dev[p] = dev[p - 1]
+                w[p] = w[p - 1]
+                p -= 1
+            dev[p] = d
+            w[p] = wk
+            m += 1
+        total = 0.0
+        for p in range(m):      # in sorted order, as the cumulative sum below adds them
+            total += w[p]
+        out[q] = 0.0
+        if m == 0 or not total > 0.0:
+            continue
+        acc = 0.0
+        half = 0
+        for p in range(m):
+            acc += w[p]
+            if acc >= 0.5 * total:
+                half = p
+                break
+        s = 1.4826 * dev[half]
+        if np.isfinite(s):
+            out[q] = s

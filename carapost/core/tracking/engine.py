@@ -16,6 +16,8 @@ from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCT
 from . import elastic, patch, reacquire, vote
 from .nearest import SortedSweep
 from .assign import candidates, mutual_best, size_changed
+from .depth_kernel import fuse_points
+from .finite import finite_rows
 from .geometry import (RigState, depth_uncertainty, held_out_errors, information, refine_poses, reprojection,
                        round_views, triangulate)
 from .params import TrackingParams
@@ -128,7 +130,7 @@ ELONG_SLOPE = 8.0
 
 
 def elongation(rec: np.ndarray) -> np.ndarray:
-    """``(cos, sin, k)`` of detections ``rec`` (their major axis' direction and its weight, :data:`ELONG_SLOPE`)."""
+    """``(cos, sin, k)`` of detections ``rec`` (records, or their fields by name; their major axis' direction and its weight, :data:`ELONG_SLOPE`)."""
     ratio = rec["minor"].astype(float) / np.maximum(rec["major"].astype(float), 1e-6)
     a = np.radians(rec["angle"].astype(float))
     k = 1.0 / (1.0 + ELONG_SLOPE * np.maximum(ELONG_FROM - ratio, 0.0) ** 2)
@@ -198,6 +200,10 @@ class FrameResult:
         self.score[rows] = np.nan
 
 
+#: The detection fields the tracker reads.
+_FIELDS = ("x", "y", "major", "minor", "score", "angle")
+
+
 class FrameData:
     """One frame's detections in corrected pixels, indexed globally over sensors.
 
@@ -211,19 +217,22 @@ class FrameData:
 
     def __init__(self, rig: RigState, recs: list[np.ndarray]):
         self.recs = recs
-        self.raw = [np.column_stack([r["x"], r["y"]]).astype(float) for r in recs]
-        self.xy = [rig.correct(s, xy) for s, xy in enumerate(self.raw)]
-        self.size = [np.column_stack([r["major"], r["minor"]]).astype(float) for r in recs]
-        self.offsets = np.cumsum([0] + [len(r) for r in recs])
+        counts = [len(r) for r in recs]
+        self.offsets = np.cumsum([0] + counts)
         G = int(self.offsets[-1])
-        self.sensor = np.repeat(np.arange(len(recs)), [len(r) for r in recs])
+        self.sensor = np.repeat(np.arange(len(recs)), counts)
         self.local = np.arange(G) - self.offsets[self.sensor]
-        self.size_all = np.concatenate(self.size) if G else np.zeros((0, 2))
-        every = np.concatenate(recs) if G else None
-        self.prob_all = every["score"].astype(float) if G else np.zeros(0)
-        self.el_all = elongation(every) if G else np.zeros((0, 3))
-        self.xy_all = np.concatenate(self.xy) if G else np.zeros((0, 2))
-        self.raw_all = np.concatenate(self.raw) if G else np.zeros((0, 2))
+        # Field by field: concatenating the records themselves costs several times more.
+        field = {n: np.concatenate([r[n] for r in recs]) if recs else np.zeros(0) for n in _FIELDS}
+        self.raw_all = np.column_stack([field["x"], field["y"]]).astype(float)
+        self.size_all = np.column_stack([field["major"], field["minor"]]).astype(float)
+        self.prob_all = field["score"].astype(float)
+        self.el_all = elongation(field)
+        self.xy_all = rig.correct_all(self.sensor, self.raw_all)
+        cut = self.offsets
+        # Each sensor's rows of the arrays above (views, not copies).
+        self.raw = [self.raw_all[cut[s]:cut[s + 1]] for s in range(len(recs))]
+        self.xy = [self.xy_all[cut[s]:cut[s + 1]] for s in range(len(recs))]
         self.free = np.ones(G, bool)
         self._tree = None
 
@@ -281,23 +290,11 @@ def fuse_depth(X: np.ndarray, info: np.ndarray, pred: np.ndarray, pred_sd, rows:
     rows : ndarray (N,) bool
         Points to average (measured, by two or more views).
     """
-    ok = rows & np.all(np.isfinite(pred), axis=1) & np.all(np.isfinite(info), axis=(1, 2))
-    if not np.any(ok):
-        return X
-    Jm = info[ok] / DEPTH_PX ** 2
-    vp = np.broadcast_to(np.asarray(pred_sd, float) ** 2, (len(X),))[ok]
-    dx = X[ok] - pred[ok]
-    # The disagreement's Mahalanobis distance under both covariances, (Cm + Cp)^-1 = Jm - Jm (Jm + Jp)^-1 Jm
-    # (Woodbury): Jm + Jp is always invertible, Jm alone not for two rays that are nearly parallel.  The
-    # information-weighted mean is X + (Jm + Jp)^-1 Jp (pred - X), Jp = I / vp: one solve serves both.
-    Jdx = np.einsum("nij,nj->ni", Jm, dx)
-    both = Jm + np.eye(3)[None] / vp[:, None, None]
-    sol = np.linalg.solve(both, np.stack([Jdx, -dx / vp[:, None]], axis=-1))
-    md2 = np.einsum("ni,ni->n", dx, Jdx) - np.einsum("ni,ni->n", Jdx, sol[..., 0])
-    inside = md2 <= 3.0 * FUSE_GATE ** 2
-    step = sol[..., 1]
-    out = X.copy()
-    out[np.flatnonzero(ok)[inside]] += step[inside]
+    out = np.empty_like(X)
+    var = np.ascontiguousarray(np.broadcast_to(np.asarray(pred_sd, float) ** 2, (len(X),)))
+    fuse_points(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(info, dtype=float),
+                np.ascontiguousarray(pred, dtype=float), var, np.ascontiguousarray(rows), 1.0 / DEPTH_PX ** 2,
+                3.0 * FUSE_GATE ** 2, out)
     return out
 
 
@@ -342,7 +339,7 @@ class FrameTracker:
         self.off = np.full(self.nb.shape + (3,), np.nan)
         self.motion = np.zeros(self.nb.shape + (2,))     # how each neighbour offset has changed
         self.w = elastic.weights(self.motion)
-        meas = np.all(np.isfinite(self.X), axis=1)
+        meas = finite_rows(self.X)
         elastic.update_offsets(self.off, self.nb, self.X, meas)
         self.X_last = self.X.copy()
         self.unseen = np.where(meas, 0, LAST_SEEN_FRAMES)  # frames since each point last had a position
@@ -356,7 +353,7 @@ class FrameTracker:
         self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
         # Each view's last blob sample (frame, raw px): patches are matched against the marker's
         # look there, not against the previous frame's patch, so that they cannot drift step by step.
-        blob0 = np.all(np.isfinite(self.size), axis=2) & np.all(np.isfinite(self.uv_prev), axis=2)
+        blob0 = finite_rows(self.size) & finite_rows(self.uv_prev)
         self.blob_frame = np.where(blob0 & (start_frame is not None), -1 if start_frame is None else start_frame, -1)
         self.blob_uv = np.where(blob0[..., None], self.uv_prev, np.nan)
         self._img_cache: OrderedDict = OrderedDict()
@@ -380,7 +377,7 @@ class FrameTracker:
         if B == 0:
             return self.rig.copy(), det, uv_c, np.full((B, S), np.nan)
         pred = self.rig.project(self.brim)
-        rows, sens = np.nonzero(np.all(np.isfinite(pred), axis=2))
+        rows, sens = np.nonzero(finite_rows(pred))
         r = np.full(len(rows), float(self.p.brim_point_tracking_distance))
         idx, dist = candidates(fd.tree(), fd.free, fd.shift(pred[rows, sens], sens), r, k=2)
         ok = (idx[:, 0] >= 0) & (dist[:, 1] >= CONFIDENT_RATIO * dist[:, 0])
@@ -416,7 +413,7 @@ class FrameTracker:
             uv = rig.project(Xpred)
         if nudge is not None:
             uv = uv + nudge
-        rows, sens = np.nonzero(slots & np.all(np.isfinite(uv), axis=2))
+        rows, sens = np.nonzero(slots & finite_rows(uv))
         e = np.zeros(0, int)
         if len(rows) == 0:
             return e, e, e, np.zeros(0), uv
@@ -453,7 +450,7 @@ class FrameTracker:
         rig, bdet, buv_c, berr = self._solve_brim(fd)
         # 2. Predict: constant velocity for points tracked on the previous frame,
         #    elastic prediction from the neighbours' predictions for lost points.
-        tracked = np.all(np.isfinite(self.X), axis=1)
+        tracked = finite_rows(self.X)
         Xp = np.where(np.isfinite(self.V), self.X + self.V, self.X)
         speed = np.linalg.norm(np.nan_to_num(self.V, nan=0.0), axis=1)    # mm on the previous frame
         lost = ~tracked
@@ -468,11 +465,11 @@ class FrameTracker:
         taken = np.zeros(int(offsets[-1]), bool)
         # 3. Pass 1: unambiguous matches within the Face Point Tracking Distance.
         radius = np.full(N, float(p.face_point_tracking_distance))
-        have = np.all(np.isfinite(Xp), axis=1)
+        have = finite_rows(Xp)
         # Only views that go on from the previous frame: a view coming back (the marker was hidden in
         # that camera) waits for pass 2, so that it cannot take, by a nearer prediction, the blob of a
         # neighbour the camera kept seeing (a jaw dot turning out of view projects onto the next one).
-        slots = have[:, None] & np.all(np.isfinite(self.uv_prev), axis=2)
+        slots = have[:, None] & finite_rows(self.uv_prev)
         found = {}
         Pi, Si, Di, Dd, uv1 = self._search(fd, rig, Xp, radius, slots, taken, k=2, found=found)
         fj, d1, second = self._first_two(Pi, Si, Dd)
@@ -511,13 +508,13 @@ class FrameTracker:
         taken[fd.attached(det)[2]] = True
         # 4. Pass 2: elastic prediction from the anchors (``el``), within the Max Elastic Prediction Distance.
         X2 = np.where(anchor[:, None], Xa, np.where(np.isfinite(el), el, Xp))
-        use_el = anchor | np.all(np.isfinite(el), axis=1)
+        use_el = anchor | finite_rows(el)
         r2 = np.where(use_el, float(p.face_point_max_elastic_prediction_distance),
                       float(p.face_point_tracking_distance))
         # An anchored point's projection is known to a pixel: its further views must fit it as
         # closely as any view must (Max Allowed 2D Projection Error), which keeps stray blobs off.
         r2 = np.where(anchor, np.minimum(r2, float(p.max_allowed_2d_projection_error)), r2)
-        slots = (det < 0) & np.all(np.isfinite(X2), axis=1)[:, None]
+        slots = (det < 0) & finite_rows(X2)[:, None]
         Pi, Si, Di, Dd, uv2 = self._search(fd, rig, X2, r2, slots, taken, k=3)
         cost = Dd / r2[Pi]
         ncc = np.full(len(Pi), np.nan)
@@ -526,7 +523,7 @@ class FrameTracker:
             cnt = np.bincount(key, minlength=N * S)
             prev = self.uv_prev[Pi, Si]
             # Appearance only where position alone is ambiguous (cost of patches).
-            need = np.flatnonzero((cnt[key] > 1) & np.all(np.isfinite(prev), axis=1))
+            need = np.flatnonzero((cnt[key] > 1) & finite_rows(prev))
             if len(need):
                 jobs = [(self._image(int(Si[j]), self.prev_frame), prev[j], self._image(int(Si[j]), frame),
                          fd.raw[int(Si[j])][Di[j]], int(p.patch_match_size)) for j in need]
@@ -591,7 +588,7 @@ class FrameTracker:
             rig = refine_poses(rig, Xall, uvall, vall, iterations=BUNDLE_ITERATIONS)
             X = triangulate(rig, uv_c, valid, *self._view_weights(src))
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
-        measured = np.all(np.isfinite(X), axis=1)
+        measured = finite_rows(X)
         X, pred, clamped = self._steady_depth(rig, X, valid, measured, self._view_weights(src)[0])
         X = self._patch_depth(rig, X, uv_c, src, measured, motion)
         if p.remove_bad_3d_points and np.any(measured):
@@ -604,7 +601,7 @@ class FrameTracker:
             # A point back after a loss that no neighbour can predict (most of a grazing chin lost) is
             # held to where it was last seen, within the limit per frame since: a chin dot's patch slid
             # onto the next dot's place, met a wide pair's blob and put it 21 mm off, unchecked.
-            alone = lost & ~np.all(np.isfinite(pred), axis=1)
+            alone = lost & ~finite_rows(pred)
             pred[alone] = Xp[alone]
             reach = np.where(alone, np.minimum(self.unseen + 1, LAST_SEEN_FRAMES), 1)
             X, measured = self._remove_bad_3d(rig, X, uv_c, valid, src, det, measured, back, pred, reach)
@@ -615,7 +612,7 @@ class FrameTracker:
         if np.any(one):
             Xs = self._single_sensor(rig, X, measured, uv_c, valid, one) if p.allow_single_sensor_tracking \
                 else np.full((N, 3), np.nan)
-            okk = one & np.all(np.isfinite(Xs), axis=1)
+            okk = one & finite_rows(Xs)
             X[okk] = Xs[okk]
             status[okk] = ST_SINGLE
             drop = one & ~okk
@@ -736,7 +733,7 @@ class FrameTracker:
         """Patch views (in place) for the recently blob-seen views not in ``skip`` (N, S)."""
         p = self.p
         recent = (self.blob_frame >= 0) & (np.abs(frame - self.blob_frame) <= PATCH_VIEW_FRAMES)
-        rows, sens = np.nonzero(~skip & recent & np.all(np.isfinite(uv2), axis=2))
+        rows, sens = np.nonzero(~skip & recent & finite_rows(uv2))
         if len(rows) == 0:
             return
         jobs, keep = [], []
@@ -769,7 +766,7 @@ class FrameTracker:
         """
         N, S = self.N, self.S
         out = np.zeros(N, bool)
-        rows = rows & np.all(np.isfinite(Xpred), axis=1)
+        rows = rows & finite_rows(Xpred)
         if not np.any(rows):
             return out
         used = taken.copy()
@@ -900,7 +897,7 @@ class FrameTracker:
             return
         valid = src != SRC_NONE
         rows = np.flatnonzero((valid.sum(1) == 2) & ((src == SRC_DETECTION).sum(1) == 2)
-                              & np.all(np.isfinite(pred), axis=1) & np.all(np.isfinite(X), axis=1))
+                              & finite_rows(pred) & finite_rows(X))
         if len(rows) == 0:
             return
         v = valid[rows]
@@ -942,7 +939,7 @@ class FrameTracker:
             Xb = triangulate(rig, uv_c[r], blob[two])
             e = reprojection(rig, Xb, uv_c[r], patch[r])
             drop[two] = patch[r] & (np.nan_to_num(e, nan=np.inf) > PATCH_AGREE_PX)
-        measured = np.all(np.isfinite(X), axis=1)
+        measured = finite_rows(X)
         few = ~two & measured[rows]
         if np.any(few):
             r = rows[few]
@@ -996,7 +993,7 @@ class FrameTracker:
         pred = self._predict(X, measured & (blob.sum(1) >= 2), rows)
         if motion is not None:
             pred = np.where(np.isfinite(pred), pred, motion[rows])
-        ok = np.all(np.isfinite(pred), axis=1)
+        ok = finite_rows(pred)
         rows, pred = rows[ok], pred[ok]
         if len(rows) == 0:
             return X
@@ -1050,7 +1047,7 @@ class FrameTracker:
             dev = np.linalg.norm(X - pred, axis=1)
             firm = measured & ~narrow & ~(dev > float(self.p.max_allowed_3d_point_error))
             firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w)
-            has_firm = np.all(np.isfinite(firm_pred), axis=1)
+            has_firm = finite_rows(firm_pred)
             # A narrow point whose depth its firm neighbours put millimetres away (to be held near them below)
             # does not vote for the points without firm neighbours: a close pair 5.5 mm deep pulled a chin dot
             # beside it, well measured by a wide pair, 2.4 mm towards its own error.
@@ -1062,15 +1059,14 @@ class FrameTracker:
             pred[has_firm] = firm_pred[has_firm]
         # How far each prediction can be off: the face's deformation over its neighbours' distance, or, where
         # they disagree about the depth (a jaw point between the still cheek and the moving chin), their spread.
-        rows = np.flatnonzero(measured & np.all(np.isfinite(pred), axis=1))
+        rows = np.flatnonzero(measured & finite_rows(pred))
         spread = np.zeros(len(X))
         if len(rows):
-            voters = np.where(has_firm[rows, None], firm[None], voting[None])
-            spread[rows] = self._vote_spread(X, voters, rows, pred[rows], u[rows])
+            spread[rows] = self._vote_spread(X, has_firm[rows], firm, voting, rows, pred[rows], u[rows])
         Xm = X
         X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred,
                        np.maximum(self.pred_sd, spread), measured)
-        rows = np.flatnonzero(narrow & np.all(np.isfinite(pred), axis=1))
+        rows = np.flatnonzero(narrow & finite_rows(pred))
         if len(rows) == 0:
             return X, pred, clamped
         along = np.einsum("ni,ni->n", X[rows] - pred[rows], u[rows])
@@ -1093,25 +1089,18 @@ class FrameTracker:
         clamped[rows] = held
         return X, pred, clamped
 
-    def _vote_spread(self, X, available, rows, pred, u):
+    def _vote_spread(self, X, use_firm, firm, voting, rows, pred, u):
         """Weighted robust spread (mm) along ``u`` of the neighbour votes behind ``pred`` for ``rows``.
 
-        ``available`` (n, N) bool: the points each row's prediction was made from.
+        Each row's prediction was made from the points ``firm`` (N,) where ``use_firm`` (n,), else ``voting`` (N,).
         Where the neighbours a point moves with disagree about its depth (a jaw point
         between the still cheek and the moving chin), their prediction is no firmer
         than two close cameras, and the depth is held only within this spread of it.
         """
-        nb = self.nb[rows]
-        safe = np.maximum(nb, 0)
-        use = (nb >= 0) & np.take_along_axis(available, safe, 1) & np.all(np.isfinite(self.off[rows]), axis=2)
-        dev = np.abs(np.einsum("nki,ni->nk", X[safe] + self.off[rows] - pred[:, None, :], u))
-        w = np.where(use, self.w[rows], 0.0)
-        dev = np.where(use, dev, np.inf)
-        order = np.argsort(dev, axis=1)
-        cw = np.cumsum(np.take_along_axis(w, order, 1), axis=1)
-        half = np.argmax(cw >= 0.5 * cw[:, -1:], axis=1)
-        spread = 1.4826 * np.take_along_axis(dev, order, 1)[np.arange(len(rows)), half]
-        return np.where(np.isfinite(spread) & (cw[:, -1] > 0), spread, 0.0)
+        out = np.empty(len(rows))
+        elastic.along_spread(X, self.nb, self.off, self.w, np.ascontiguousarray(pred),
+                             np.ascontiguousarray(u), rows, use_firm, firm, voting, out)
+        return out
 
     def _remove_bad_3d(self, rig, X, uv_c, valid, src, det, measured, back, pred, reach=1):
         """Detach views that put a point farther than Max Allowed 3D Point Error from its neighbours' prediction.
@@ -1158,7 +1147,7 @@ class FrameTracker:
         out = np.full((N, 3), np.nan)
         rows = np.flatnonzero(one)
         pred = self._predict(X, measured, rows)
-        keep = np.all(np.isfinite(pred), axis=1)
+        keep = finite_rows(pred)
         rows, pred = rows[keep], pred[keep]
         if len(rows) == 0:
             return out

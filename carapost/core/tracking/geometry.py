@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..camera import Camera
-from .geometry_kernel import (dlt_held_out, dlt_solve, pixel_errors, pixels, pose_residuals, pose_weighted_jacobian,
-                              rotation_matrices)
+from .geometry_kernel import dlt_depth_weighted, dlt_held_out, pixel_errors, pixels, rotation_matrices
+from .depth_kernel import depth_spread, view_information
+from .pose_kernel import refine_rig
 
 
 def rodrigues(w: np.ndarray) -> np.ndarray:
@@ -42,10 +43,14 @@ class RigState:
         self.R = np.stack([np.asarray(c.rotation, float) for c in cameras])
         self.C = np.stack([np.asarray(c.position, float) for c in cameras])
         self._P_of = None
+        # Each camera's (cx, cy, k1, k2, k3, aspect) where all have a radial model (:meth:`correct_all`).
+        terms = [c.radial_terms() for c in cameras]
+        self._radial = None if any(t is None for t in terms) else \
+            np.array([(*t, c.aspect) for t, c in zip(terms, cameras)], float)
 
     def copy(self) -> "RigState":
         out = RigState.__new__(RigState)
-        out.cameras, out.K, out.Kinv = self.cameras, self.K, self.Kinv
+        out.cameras, out.K, out.Kinv, out._radial = self.cameras, self.K, self.Kinv, self._radial
         out.R, out.C = self.R.copy(), self.C.copy()
         out._P_of = None
         return out
@@ -85,6 +90,25 @@ class RigState:
     def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
         """Raw pixels of sensor ``s`` to corrected pixels."""
         return self.cameras[s].correct(raw_xy) if len(raw_xy) else np.zeros((0, 2))
+
+    def correct_all(self, sensor: np.ndarray, raw_xy: np.ndarray) -> np.ndarray:
+        """Raw pixels ``raw_xy`` (G, 2) of sensors ``sensor`` (G,) to corrected pixels, every sensor at once.
+
+        :meth:`.Camera.correct`'s arithmetic on the rows of all sensors together (one set of array
+        operations a frame instead of one per sensor); cameras without a radial model go one by one.
+        """
+        if self._radial is None:
+            out = np.empty((len(raw_xy), 2))
+            for s in range(self.S):
+                rows = sensor == s
+                out[rows] = self.correct(s, raw_xy[rows])
+            return out
+        cx, cy, k1, k2, k3, a = self._radial[sensor].T
+        dx = raw_xy[:, 0] - cx
+        dy = a * (raw_xy[:, 1] - cy)
+        r2 = dx * dx + dy * dy
+        s = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        return np.stack([s * dx + cx, s * dy / a + cy], axis=-1)
 
     def rays(self, s: np.ndarray, uv_c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Origins ``(N, 3)`` and unit directions ``(N, 3)`` of corrected pixels ``uv_c`` in sensors ``s``."""
@@ -141,16 +165,11 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.n
     ok = valid.sum(axis=1) >= 2
     if not np.any(ok):
         return out
-    P = rig.P()
     v = valid[ok]
     uv = np.where(v[..., None], uv_c[ok], 0.0)
-    conf = 1.0 if weight is None else weight[ok]
-    w = v * conf
+    conf = np.ones(v.shape) if weight is None else np.ascontiguousarray(weight[ok], dtype=float)
     el = _elongation(None if elong is None else elong[ok], v.shape)
-    for _ in range(2):
-        X = dlt_solve(P, uv, w, el)
-        w = _depth_weights(P, X, v) * conf
-    out[ok] = X
+    out[ok] = dlt_depth_weighted(rig.P(), uv, np.ascontiguousarray(v), conf, el)
     return out
 
 
@@ -226,30 +245,10 @@ def refine_poses(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarr
     if not np.any(active):
         return out
     Xf = np.where(np.isfinite(X), X, 0.0)
-    obs = np.where(good[..., None], uv_c.transpose(1, 0, 2), 0.0)             # (S, N, 2)
-    S, N = good.shape
-    eye6 = np.eye(6)
-    for _ in range(iterations):
-        xc = (Xf[None] - out.C[:, None]) @ out.R.transpose(0, 2, 1)           # (S, N, 3)
-        # The element-wise steps are compiled loops (:mod:`.geometry_kernel`); the products stay numpy's.
-        r = np.empty((S, N, 2))
-        Jx = np.empty((S, N, 2, 3))
-        pose_residuals(xc, obs, good, out.K, r, Jx)
-        Jw = np.empty((S, N, 2, 6))
-        rw = np.empty((S, N, 2))
-        pose_weighted_jacobian(xc, Jx, Jx @ out.R[:, None], r, good, float(huber), Jw, rw)
-        Jw = Jw.reshape(S, 2 * N, 6)
-        rw = rw.reshape(S, 2 * N, 1)
-        Jt = Jw.transpose(0, 2, 1)
-        H = Jt @ Jw
-        g = Jt @ rw
-        H[~active] = eye6
-        g[~active] = 0.0
-        d = -np.linalg.solve(H + 1e-9 * eye6, g)[..., 0]
-        out.R = rodrigues(d[:, :3]) @ out.R
-        out.C = out.C + d[:, 3:]
-        if np.max(np.abs(d)) < 1e-7:
-            break
+    obs = np.ascontiguousarray(np.where(good[..., None], uv_c.transpose(1, 0, 2), 0.0))   # (S, N, 2)
+    R, C = np.ascontiguousarray(out.R), np.ascontiguousarray(out.C)
+    refine_rig(out.K, R, C, Xf, obs, np.ascontiguousarray(good), active, int(iterations), float(huber))
+    out.R, out.C = R, C
     return out
 
 
@@ -276,20 +275,9 @@ def depth_uncertainty(rig: RigState, X: np.ndarray, valid: np.ndarray) -> tuple[
         length divided by the sine of the widest angle between two views
         (inf with fewer than two views).
     """
-    d = X[:, None, :] - rig.C[None]                                   # (N, S, 3)
-    dist = np.linalg.norm(d, axis=2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        d = np.where(valid[..., None], d / dist[..., None], np.nan)
-        cos = np.einsum("nsi,nti->nst", d, d)
-    cos_min = np.nanmin(cos.reshape(len(X), -1), axis=1, initial=1.0)
-    sin = np.sqrt(np.clip(1.0 - cos_min ** 2, 0.0, 1.0))
-    f = rig.K[:, 0, 0]
-    n = valid.sum(1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(valid, dist / f, 0.0).sum(1) / n
-        mm = np.where((n >= 2) & (sin > 1e-9), scale / sin, np.inf)
-        u = np.nansum(d, axis=1)
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
+    u = np.empty((len(X), 3))
+    mm = np.empty(len(X))
+    depth_spread(np.ascontiguousarray(X, dtype=float), rig.C, rig.K[:, 0, 0].copy(), np.ascontiguousarray(valid), u, mm)
     return u, mm
 
 
@@ -302,12 +290,7 @@ def information(rig: RigState, X: np.ndarray, valid: np.ndarray, weight: np.ndar
     loose; cameras on both sides fix it.  ``weight`` (N, S): each view's confidence as in
     :func:`triangulate` (its information scales with the square).
     """
-    d = X[:, None, :] - rig.C[None]                                   # (N, S, 3)
-    dist2 = np.einsum("nsi,nsi->ns", d, d)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        g = np.where(valid, rig.K[None, :, 0, 0] ** 2 / dist2, 0.0)
-        if weight is not None:
-            g = g * weight ** 2
-        r = np.where(valid[..., None], d / np.sqrt(dist2)[..., None], 0.0)
-    return np.einsum("ns,ij->nij", g, np.eye(3)) - np.einsum("ns,nsi,nsj->nij", g, r, r)
-
+    out = np.empty((len(X), 3, 3))
+    w = np.ones(valid.shape) if weight is None else np.ascontiguousarray(weight, dtype=float)
+    view_information(np.ascontiguousarray(X, dtype=float), rig.C, rig.K[:, 0, 0].copy(), np.ascontiguousarray(valid), w, out)
+    return out

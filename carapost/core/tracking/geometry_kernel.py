@@ -1,6 +1,6 @@
 """Compiled loops of the tracker's geometry: linear triangulation (:func:`.geometry.triangulate`,
-:func:`.geometry.held_out_errors`), projection and reprojection errors, and pose refinement's
-residuals and Jacobian (:func:`.geometry.refine_poses`).
+:func:`.geometry.held_out_errors`), projection and reprojection errors, and rotation matrices.
+(Pose refinement is :mod:`.pose_kernel`.)
 
 As numpy, each solve was ~40 array operations on (components, views, points)
 arrays of a few hundred points (the DLT rows, their products, the sum over views,
@@ -14,8 +14,10 @@ multiply-add, no reassociation), so the results are the same to the bit:
 * the views are summed in order from 0.0 (as ``ndarray.sum`` over a short middle axis);
 * ``M x = b`` is solved by the adjugate, NaN where ``|det| <= 1e-300``.
 
-The matrix products of the depth weights and projections stay numpy's: BLAS
-fuses their multiply-adds, which plain loops would not reproduce.
+The matrix products of the projections stay numpy's.  Since session 22 the
+depth weights of :func:`.geometry.triangulate`'s second solve are worked out
+here as well (:func:`dlt_depth_weighted`): the tracks stored (float32) came out
+the same.
 """
 from __future__ import annotations
 
@@ -51,9 +53,9 @@ def rotation_matrices(w, out):
                 out[i, a, b] = (1.0 if a == b else 0.0) + sn * K[a, b] + c1 * kk
 
 
-@njit(**JIT_EXACT)
+@njit(inline="always", **JIT_EXACT)
 def _view_terms(P, uv, w, el, i, s, m, b):
-    """View ``s`` of point ``i``'s share of the normal equations: upper triangle ``m`` (6,) and ``b`` (3,).
+    """View ``s`` of point ``i``'s share of the normal equations: upper triangle ``m[s]`` (6,) and ``b[s]`` (3,).
 
     ``el[i, s] = (cos, sin, k)``: the view's equation along the image direction (cos, sin) is
     weighted ``k`` times the one across it (1: the same, as for a round dot).
@@ -78,18 +80,18 @@ def _view_terms(P, uv, w, el, i, s, m, b):
         a01, a11 = k * (c * a01 + t * a11), c * a11 - t * a01
         a02, a12 = k * (c * a02 + t * a12), c * a12 - t * a02
         a03, a13 = k * (c * a03 + t * a13), c * a13 - t * a03
-    m[0] = a00 * a00 + a10 * a10
-    m[1] = a00 * a01 + a10 * a11
-    m[2] = a00 * a02 + a10 * a12
-    m[3] = a01 * a01 + a11 * a11
-    m[4] = a01 * a02 + a11 * a12
-    m[5] = a02 * a02 + a12 * a12
-    b[0] = -(a00 * a03 + a10 * a13)
-    b[1] = -(a01 * a03 + a11 * a13)
-    b[2] = -(a02 * a03 + a12 * a13)
+    m[s, 0] = a00 * a00 + a10 * a10
+    m[s, 1] = a00 * a01 + a10 * a11
+    m[s, 2] = a00 * a02 + a10 * a12
+    m[s, 3] = a01 * a01 + a11 * a11
+    m[s, 4] = a01 * a02 + a11 * a12
+    m[s, 5] = a02 * a02 + a12 * a12
+    b[s, 0] = -(a00 * a03 + a10 * a13)
+    b[s, 1] = -(a01 * a03 + a11 * a13)
+    b[s, 2] = -(a02 * a03 + a12 * a13)
 
 
-@njit(**JIT_EXACT)
+@njit(inline="always", **JIT_EXACT)
 def _solve_into(m, b, out, i):
     """``out[i] = M^-1 b`` by the adjugate (``m``: upper triangle m00 m01 m02 m11 m12 m22); NaN if singular."""
     m00, m01, m02, m11, m12, m22 = m[0], m[1], m[2], m[3], m[4], m[5]
@@ -111,7 +113,7 @@ def _solve_into(m, b, out, i):
         out[i, 2] = np.nan
 
 
-@njit(**JIT_EXACT)
+@njit(inline="always", **JIT_EXACT)
 def _view_sums(P, uv, w, el, i, ms, bs, msum, bsum):
     """Point ``i``'s normal-equation terms of each view into ``ms[s]``, ``bs[s]``, and their sums (view order)."""
     for j in range(6):
@@ -119,7 +121,7 @@ def _view_sums(P, uv, w, el, i, ms, bs, msum, bsum):
     for j in range(3):
         bsum[j] = 0.0
     for s in range(w.shape[1]):
-        _view_terms(P, uv, w, el, i, s, ms[s], bs[s])
+        _view_terms(P, uv, w, el, i, s, ms, bs)
         for j in range(6):
             msum[j] += ms[s, j]
         for j in range(3):
@@ -127,16 +129,32 @@ def _view_sums(P, uv, w, el, i, ms, bs, msum, bsum):
 
 
 @njit(**JIT_EXACT)
-def dlt_solve(P, uv, w, el):
-    """Weighted DLT points ``(n, 3)`` of ``uv`` (n, S, 2) with view weights ``w`` (n, S) (0: not a view)
-    and each view's elongation ``el`` (n, S, 3) (:func:`_view_terms`)."""
-    n, S = w.shape
+def dlt_depth_weighted(P, uv, valid, conf, el):
+    """Weighted DLT points ``(n, 3)`` of ``uv`` (n, S, 2), solved twice per point.
+
+    The first solve weights each view by its confidence ``conf`` (n, S), the second by ``100 / depth``
+    (depth from the first, at least 1e-3) times it; views not ``valid`` weigh 0.
+
+    The inverse depth turns the DLT's algebraic error into the image-plane error (:func:`.geometry.triangulate`).
+    The depths are summed here in plain order where numpy's matrix product fused them: the same points to
+    within a few units in the last place.
+    """
+    n, S = valid.shape
     out = np.empty((n, 3))
+    w = np.empty((n, S))
     ms = np.empty((S, 6))
     bs = np.empty((S, 3))
     msum = np.empty(6)
     bsum = np.empty(3)
     for i in range(n):
+        for s in range(S):
+            w[i, s] = conf[i, s] if valid[i, s] else 0.0
+        _view_sums(P, uv, w, el, i, ms, bs, msum, bsum)
+        _solve_into(msum, bsum, out, i)
+        for s in range(S):
+            if valid[i, s]:
+                depth = out[i, 0] * P[s, 2, 0] + out[i, 1] * P[s, 2, 1] + out[i, 2] * P[s, 2, 2] + P[s, 2, 3]
+                w[i, s] = 1.0 / max(abs(depth), 1e-3) * 100.0 * conf[i, s]
         _view_sums(P, uv, w, el, i, ms, bs, msum, bsum)
         _solve_into(msum, bsum, out, i)
     return out
@@ -144,7 +162,8 @@ def dlt_solve(P, uv, w, el):
 
 @njit(**JIT_EXACT)
 def dlt_held_out(P, uv, w, el):
-    """Points ``(S, n, 3)`` of :func:`dlt_solve` with view ``s`` left out of the sum (all views' sum minus its own)."""
+    """Weighted DLT points ``(S, n, 3)`` of ``uv`` (n, S, 2) with view weights ``w`` (n, S) and elongation ``el``
+    (n, S, 3) (:func:`_view_terms`), view ``s`` left out of the sum (all views' sum minus its own)."""
     n, S = w.shape
     out = np.empty((S, n, 3))
     ms = np.empty((S, 6))
@@ -165,78 +184,6 @@ def dlt_held_out(P, uv, w, el):
             for j in range(3):
                 out[s, i, j] = row[0, j]
     return out
-
-
-@njit(**JIT_EXACT)
-def pose_residuals(xc, obs, good, K, r, Jx):
-    """Gauss-Newton residuals ``r`` (S, N, 2) and image Jacobians ``Jx`` (S, N, 2, 3) of camera-frame points ``xc``.
-
-    For :func:`.geometry.refine_poses`: ``z`` floored at 1e-6 where ``|z| <= 1e-6``, ``u = f x + k y``,
-    ``v = fa y`` (K's skew ``k``), ``r = (u + cx) - obs`` (0 where not ``good``),
-    ``d(u, v) / d xc = [[f, k, -u], [0, fa, -v]] / z``, each as numpy's array expressions computed it.
-    """
-    S, N = good.shape
-    for s in range(S):
-        f = K[s, 0, 0]
-        k = K[s, 0, 1]
-        fa = K[s, 1, 1]
-        cx = K[s, 0, 2]
-        cy = K[s, 1, 2]
-        for i in range(N):
-            z = xc[s, i, 2]
-            if not abs(z) > 1e-6:
-                z = 1e-6
-            x = xc[s, i, 0] / z
-            y = xc[s, i, 1] / z
-            u = f * x + k * y
-            v = fa * y
-            if good[s, i]:
-                r[s, i, 0] = u + cx - obs[s, i, 0]
-                r[s, i, 1] = v + cy - obs[s, i, 1]
-            else:
-                r[s, i, 0] = 0.0
-                r[s, i, 1] = 0.0
-            Jx[s, i, 0, 0] = f / z
-            Jx[s, i, 0, 1] = k / z
-            Jx[s, i, 0, 2] = -u / z
-            Jx[s, i, 1, 0] = 0.0
-            Jx[s, i, 1, 1] = fa / z
-            Jx[s, i, 1, 2] = -v / z
-
-
-@njit(**JIT_EXACT)
-def pose_weighted_jacobian(xc, Jx, JxR, r, good, huber, Jw, rw):
-    """Huber-weighted pose Jacobian ``Jw`` (S, N, 2, 6) and residuals ``rw`` (S, N, 2).
-
-    Rotation columns ``cross(xc, row of Jx)`` (``d xc / d omega = -[xc]x``), position columns ``-JxR``
-    (``Jx @ R``, numpy's product), both rows times ``w = sqrt(min(1, huber / max(|r|, 1e-12)))``
-    (0 where not ``good``; NaN propagates through min and max as in numpy).
-    """
-    S, N = good.shape
-    for s in range(S):
-        for i in range(N):
-            r0 = r[s, i, 0]
-            r1 = r[s, i, 1]
-            w = 0.0
-            if good[s, i]:
-                nr = np.sqrt(r0 * r0 + r1 * r1)
-                m = nr if (nr > 1e-12 or np.isnan(nr)) else 1e-12
-                q = huber / m
-                w = np.sqrt(q if (q < 1.0 or np.isnan(q)) else 1.0)
-            a0 = xc[s, i, 0]
-            a1 = xc[s, i, 1]
-            a2 = xc[s, i, 2]
-            for row in range(2):
-                b0 = Jx[s, i, row, 0]
-                b1 = Jx[s, i, row, 1]
-                b2 = Jx[s, i, row, 2]
-                Jw[s, i, row, 0] = (a1 * b2 - a2 * b1) * w
-                Jw[s, i, row, 1] = (a2 * b0 - a0 * b2) * w
-                Jw[s, i, row, 2] = (a0 * b1 - a1 * b0) * w
-                for c in range(3):
-                    Jw[s, i, row, 3 + c] = -JxR[s, i, row, c] * w
-            rw[s, i, 0] = r0 * w
-            rw[s, i, 1] = r1 * w
 
 
 @njit(**JIT_EXACT)
