@@ -253,3 +253,29 @@ def test_correct_all_is_each_cameras_correction(rig):
     for s in range(rig.S):
         assert np.array_equal(got[sensor == s], rig.cameras[s].correct(raw[sensor == s]))
     assert rig.correct_all(sensor[:0], raw[:0]).shape == (0, 2)
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 8, 151])
+def test_median_is_numpys(n):
+    from carapost.core.tracking.engine import _median
+    a = np.random.default_rng(n).normal(size=n)
+    assert _median(a) == np.median(a)
+    a[n // 2] = np.nan
+    assert np.isnan(_median(a))
+
+
+def test_vote_support_sums_each_neighbours_nearest_agreement():
+    from carapost.core.tracking.vote import AGREE_PX, _support
+    rng = np.random.default_rng(11)
+    g, C, K, T = 9, 4, 5, 3
+    mine = rng.normal(0.0, 6.0, (g, C, 2))
+    mine[0, 2] = np.nan                                  # a candidate that is not there
+    theirs = rng.normal(0.0, 6.0, (g, K, T, 2))
+    theirs[1, 3] = np.nan                                # a neighbour without displacements
+    theirs[2, 0, 1] = np.nan
+    w = rng.uniform(0.1, 1.0, (g, K))
+    got = _support(mine, theirs, w)
+    d2 = np.fmin.reduce(((mine[:, None, :, None, :] - theirs[:, :, None, :, :]) ** 2).sum(-1), axis=3)
+    want = np.einsum("gkc,gk->gc", np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2)), w)
+    want[0, 2] = -np.inf
+    assert np.allclose(got, want, rtol=1e-13, atol=0)

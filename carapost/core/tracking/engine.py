@@ -87,6 +87,15 @@ MOTION_JUDGE_MM = 1.0
 OFF_DEPTH_VOTE_MM = 2.0
 
 
+def _median(a: np.ndarray) -> float:
+    """``np.median`` of a 1-D array (NaN if it holds one), by a plain sort: ~3 us where numpy takes ~20."""
+    v = np.sort(a)
+    n = len(v)
+    if n == 0 or np.isnan(v[-1]):
+        return float("nan")
+    return float(v[n // 2]) if n % 2 else float((v[n // 2 - 1] + v[n // 2]) / 2)
+
+
 def held_out_limit(errors: np.ndarray, max_error: float) -> float:
     """The limit on a held-out view's error (px) on one frame.
 
@@ -105,7 +114,7 @@ def held_out_limit(errors: np.ndarray, max_error: float) -> float:
     """
     if len(errors) < 8:
         return float(max_error)
-    sigma = 1.4826 * float(np.median(errors))
+    sigma = 1.4826 * _median(errors)
     return float(min(max_error, max(HELD_OUT_FLOOR_PX, HELD_OUT_SIGMAS * sigma)))
 
 

@@ -80,13 +80,6 @@ class RigState:
         pixels(X @ P[:, :, :3].transpose(0, 2, 1), P, out)
         return out
 
-    def project_in(self, X: np.ndarray, s: int) -> np.ndarray:
-        """Corrected pixels ``(N, 2)`` of world points ``X`` (N, 3) in sensor ``s`` alone (as :meth:`project`)."""
-        P = self.P()[s]
-        out = np.empty((len(X), 1, 2))
-        pixels((X @ P[:, :3].T)[None], P[None], out)
-        return out[:, 0]
-
     def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
         """Raw pixels of sensor ``s`` to corrected pixels."""
         return self.cameras[s].correct(raw_xy) if len(raw_xy) else np.zeros((0, 2))
@@ -204,8 +197,9 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
         X = triangulate(rig, uv_c, valid, weight, elong)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
     Xs = dlt_held_out(P, uv, w, _elongation(elong, valid.shape))   # (S, N, 3) without view s
-    S = valid.shape[1]
-    proj = np.stack([rig.project_in(Xs[s], s) for s in range(S)], axis=1)
+    # Each leave-one-out point projected into the camera it left out: one batched product for all cameras.
+    proj = np.empty(valid.shape + (2,))
+    pixels(Xs @ P[:, :, :3].transpose(0, 2, 1), P, proj)
     Xs = Xs.transpose(1, 0, 2)
     err = np.empty(valid.shape)
     pixel_errors(proj, uv_c, valid, -1.0, err)

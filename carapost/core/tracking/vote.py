@@ -94,7 +94,7 @@ def nudges(uv: np.ndarray, slots: np.ndarray, ask: np.ndarray, fd, radius: float
     # move, and a view without a blob of its own (hidden, undetected) must not be sent onto another dot.
     mine = np.concatenate([np.zeros((len(n), 1, 2)), off[n, s]], axis=1)   # (g, 1 + K_VOTE, 2)
     theirs = off[np.maximum(nbr, 0), s[:, None]]                          # (g, K, K_VOTE, 2)
-    support = _support(_nearest_d2(mine, theirs), w, mine)                 # NaN: no neighbour blob
+    support = _support(mine, theirs, w)
     # Round 2: each neighbour now votes for one displacement only, the one it believes in (its nearest
     # blob, or its own round-1 choice if it was asked and its neighbours had a say).  Among the many
     # blobs of a dense region some neighbour blob lies near almost any displacement; one vote each
@@ -105,7 +105,7 @@ def nudges(uv: np.ndarray, slots: np.ndarray, ask: np.ndarray, fd, radius: float
     said = support[np.arange(len(n)), first] > 0                          # else no neighbour had a word
     belief[n[said], s[said]] = mine[np.flatnonzero(said), first[said]]
     theirs = belief[np.maximum(nbr, 0), s[:, None]]                       # (g, K, 2)
-    support = _support(_nearest_d2(mine, theirs[:, :, None, :]), w, mine)
+    support = _support(mine, theirs[:, :, None, :], w)
     best = np.argmax(support, axis=1)
     top = support[np.arange(len(n)), best]
     # A blob must outvote staying put, and a farther one the nearest blob too (what pass 1 would take).
@@ -116,31 +116,32 @@ def nudges(uv: np.ndarray, slots: np.ndarray, ask: np.ndarray, fd, radius: float
     return out
 
 
-def _support(d2: np.ndarray, w: np.ndarray, mine: np.ndarray) -> np.ndarray:
-    """(g, C) support of each candidate in ``mine`` (g, C, 2) from the squared distances ``d2`` (g, K, C) to
-    the neighbours' displacements, weighted by ``w`` (g, K); -inf for a candidate that is not there."""
-    agree = np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2))
-    support = np.einsum("gkc,gk->gc", agree, w)
-    return np.where(np.isfinite(mine[..., 0]), support, -np.inf)
+def _support(mine: np.ndarray, theirs: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(g, C) support of each candidate in ``mine`` (g, C, 2) from the neighbours' displacements ``theirs``
+    (g, K, T, 2; NaN: none), weighted by ``w`` (g, K); -inf for a candidate that is not there.
 
-
-def _nearest_d2(mine: np.ndarray, theirs: np.ndarray) -> np.ndarray:
-    """(g, K, C) squared distance of each candidate ``mine`` (g, C, 2) to the nearest of each neighbour's
-    displacements ``theirs`` (g, K, T, 2); NaN where the neighbour has none."""
-    g, K = theirs.shape[:2]
-    out = np.empty((g, K, mine.shape[1]))
-    _nearest_d2_loop(np.ascontiguousarray(mine), np.ascontiguousarray(theirs), out)
+    Each neighbour adds its weight times ``exp(-d² / (2 AGREE_PX²))``, ``d`` the distance from the
+    candidate to the nearest of its displacements (nothing without one).
+    """
+    g, C = mine.shape[:2]
+    out = np.empty((g, C))
+    _support_loop(np.ascontiguousarray(mine), np.ascontiguousarray(theirs), np.ascontiguousarray(w),
+                  2.0 * AGREE_PX ** 2, out)
     return out
 
 
 @njit(**JIT_EXACT)
-def _nearest_d2_loop(mine, theirs, out):
-    """:func:`_nearest_d2` as loops: ``dx * dx + dy * dy``, the least over T ignoring NaN (``np.fmin``)."""
+def _support_loop(mine, theirs, w, scale, out):
+    """:func:`_support` as loops (the least squared distance over T ignoring NaN, as ``np.fmin``)."""
     G, C = mine.shape[0], mine.shape[1]
     K, T = theirs.shape[1], theirs.shape[2]
     for g in range(G):
-        for k in range(K):
-            for c in range(C):
+        for c in range(C):
+            if not np.isfinite(mine[g, c, 0]):
+                out[g, c] = -np.inf
+                continue
+            acc = 0.0
+            for k in range(K):
                 best = np.nan
                 for t in range(T):
                     dx = mine[g, c, 0] - theirs[g, k, t, 0]
@@ -148,4 +149,6 @@ def _nearest_d2_loop(mine, theirs, out):
                     d = dx * dx + dy * dy
                     if np.isnan(best) or d < best:
                         best = d
-                out[g, k, c] = best
+                if not np.isnan(best):
+                    acc += np.exp(-best / scale) * w[g, k]
+            out[g, c] = acc
