@@ -279,3 +279,41 @@ def test_vote_support_sums_each_neighbours_nearest_agreement():
     want = np.einsum("gkc,gk->gc", np.exp(-np.nan_to_num(d2, nan=np.inf) / (2.0 * AGREE_PX ** 2)), w)
     want[0, 2] = -np.inf
     assert np.allclose(got, want, rtol=1e-13, atol=0)
+
+
+def test_elastic_prediction_is_the_weighted_median_of_the_votes():
+    rng = np.random.default_rng(12)
+    N, K = 60, 6
+    X = rng.normal(0.0, 20.0, (N, 3))
+    X[5] = np.nan                                        # an available neighbour without a position
+    nb = rng.integers(-1, N, (N, K))
+    off = rng.normal(0.0, 3.0, (N, K, 3))
+    off[::7, 2] = np.nan
+    w = rng.uniform(0.05, 3.0, (N, K))
+    w[1::4] = 1.0                                        # even weights: the plain median
+    available = rng.random(N) > 0.2
+    pred, count = elastic.predict(X, available, nb, off, weight=w)
+    plain, count0 = elastic.predict(X, available, nb, off)
+    assert np.array_equal(count, count0)
+    checked = 0
+    for i in range(N):
+        use = [k for k, j in enumerate(nb[i]) if j >= 0 and available[j] and np.all(np.isfinite(off[i, k]))]
+        assert count[i] == len(use)
+        if len(use) < elastic.MIN_NEIGHBOURS:
+            assert np.all(np.isnan(pred[i]))
+            continue
+        v = X[nb[i, use]] + off[i, use]
+        ww = w[i, use]
+        if np.max(ww) > elastic.UNEVEN * np.min(ww):
+            for c in range(3):
+                cost = np.abs(v[:, c, None] - v[None, :, c]) @ ww
+                if np.all(np.isfinite(cost)):
+                    least = cost.min()
+                    assert pred[i, c] == pytest.approx(v[cost <= least + 1e-9 * (1 + least), c].mean(), rel=1e-12)
+                    checked += 1
+                else:
+                    assert np.isnan(pred[i, c])
+        else:
+            assert np.array_equal(pred[i], plain[i], equal_nan=True)
+            assert np.allclose(plain[i], np.median(v, axis=0), equal_nan=True)
+    assert checked > 30

@@ -7,6 +7,7 @@ from scipy.spatial import cKDTree
 
 from ..jit import JIT_EXACT
 
+from .finite import finite_rows
 from .nearest import SortedSweep
 
 #: Candidates considered per point and sensor (the nearest ones within the radius).
@@ -41,7 +42,7 @@ def candidates(tree: cKDTree | SortedSweep | None, free: np.ndarray, pred: np.nd
     N = len(pred)
     idx = np.full((N, k), -1)
     dist = np.full((N, k), np.inf)
-    ok = np.all(np.isfinite(pred), axis=1) & (radius > 0)
+    ok = finite_rows(pred) & (radius > 0)
     if tree is None or tree.n == 0 or not np.any(ok):
         return idx, dist
     bound = float(np.max(radius[ok]))

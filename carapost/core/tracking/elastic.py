@@ -154,94 +154,15 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
     count : ndarray (N,) int
         Neighbours used.
     """
-    pred, use, cand, count = _votes_median(X, available, nb, off, min_neighbours)
-    ok = count >= min_neighbours
-    if not np.any(ok):
+    X = np.ascontiguousarray(X, dtype=float)
+    if weight is None:
+        pred, _use, _cand, count = _votes_median(X, available, nb, off, min_neighbours)
         return pred, count
-    if weight is not None:
-        # Weighted median per coordinate where the weights differ (near the jaw, once it has moved):
-        # the vote that minimises the weighted sum of distances to all votes (the mean of the
-        # minimisers when two tie, as the plain median of an even count does).
-        # The weighted sums are numpy's matrix product (BLAS fuses its multiply-adds); the element-wise
-        # steps around it are compiled loops.
-        rows = _uneven(use, weight, count, min_neighbours, UNEVEN)
-        if len(rows):
-            v, w, spread = _spreads(cand, use, weight, rows)
-            _weighted_median(spread @ w[..., None], v, use, rows, pred)
-    return pred, count
-
-
-@njit(**JIT_EXACT)
-def _uneven(use, weight, count, min_neighbours, ratio):
-    """Rows with ``min_neighbours`` votes whose largest used weight exceeds ``ratio`` times the smallest."""
-    n, K = use.shape
-    out = np.empty(n, np.int64)
-    m = 0
-    for i in range(n):
-        if count[i] < min_neighbours:
-            continue
-        hi = 0.0 if not use[i, 0] else weight[i, 0]
-        lo = np.inf if not use[i, 0] else weight[i, 0]
-        for k in range(1, K):
-            a = weight[i, k] if use[i, k] else 0.0
-            b = weight[i, k] if use[i, k] else np.inf
-            # NaN wins, as in np.max / np.min.
-            if not np.isnan(hi) and (np.isnan(a) or a > hi):
-                hi = a
-            if not np.isnan(lo) and (np.isnan(b) or b < lo):
-                lo = b
-        if hi > ratio * lo:
-            out[m] = i
-            m += 1
-    return out[:m]
-
-
-@njit(**JIT_EXACT)
-def _spreads(cand, use, weight, rows):
-    """For ``rows``: votes ``v`` (m, 3, K) and weights ``w`` (m, 1, K) (0 unused) and ``|v_a - v_b|`` (m, 3, K, K)."""
-    K = use.shape[1]
-    m = len(rows)
-    v = np.empty((m, 3, K))
-    w = np.empty((m, 1, K))
-    spread = np.empty((m, 3, K, K))
-    for q in range(m):
-        i = rows[q]
-        for k in range(K):
-            w[q, 0, k] = weight[i, k] if use[i, k] else 0.0
-            for c in range(3):
-                v[q, c, k] = cand[i, k, c] if use[i, k] else 0.0
-        for c in range(3):
-            for a in range(K):
-                for b in range(K):
-                    spread[q, c, a, b] = abs(v[q, c, a] - v[q, c, b])
-    return v, w, spread
-
-
-@njit(error_model="numpy", **JIT_EXACT)
-def _weighted_median(cost, v, use, rows, pred):
-    """Into ``pred[rows]``: per coordinate the mean of the votes whose weighted cost ``cost`` (m, 3, K, 1) is least.
-
-    Ties are within ``1e-9 (1 + best)``; unused votes cost inf; NaN costs propagate through the minimum.
-    ``error_model="numpy"``: a row without a least vote divides by zero as numpy did (JIT_EXACT otherwise).
-    """
-    K = use.shape[1]
-    for q in range(len(rows)):
-        i = rows[q]
-        for c in range(3):
-            best = cost[q, c, 0, 0] if use[i, 0] else np.inf
-            for a in range(1, K):
-                x = cost[q, c, a, 0] if use[i, a] else np.inf
-                if not np.isnan(best) and (np.isnan(x) or x < best):
-                    best = x
-            lim = best + 1e-9 * (1.0 + best)
-            acc = 0.0
-            n = 0
-            for a in range(K):
-                x = cost[q, c, a, 0] if use[i, a] else np.inf
-                t = x <= lim
-                acc += v[q, c, a] * (1.0 if t else 0.0)
-                n += t
-            pred[i, c] = acc / n
+    # Weighted median per coordinate where the weights differ (near the jaw, once it has moved): the vote
+    # that minimises the weighted sum of distances to all votes (the mean of the minimisers when two tie,
+    # as the plain median of an even count does).
+    return _votes_weighted_median(X, available, nb, off, min_neighbours, np.ascontiguousarray(weight, dtype=float),
+                                  UNEVEN)
 
 
 @njit(**JIT_EXACT)
@@ -291,6 +212,56 @@ def _votes_median(X, available, nb, off, min_neighbours):
                     m += 1
             pred[i, d] = 0.5 * (col[(c - 1) // 2] + col[c // 2])
     return pred, use, cand, count
+
+
+@njit(error_model="numpy", **JIT_EXACT)
+def _votes_weighted_median(X, available, nb, off, min_neighbours, weight, ratio):
+    """:func:`_votes_median`, then a weighted median per coordinate for the rows whose weights are uneven.
+
+    Uneven: the largest used weight exceeds ``ratio`` times the smallest (a NaN weight: not).  There,
+    per coordinate, each used vote costs the weighted sum of its distances to all used votes, and the
+    prediction is the mean of the votes whose cost is within ``1e-9 (1 + least)`` of the least (NaN costs
+    leave no least: NaN, as numpy divided by zero).
+    """
+    pred, use, cand, count = _votes_median(X, available, nb, off, min_neighbours)
+    n, K = nb.shape
+    cost = np.empty(K)
+    for i in range(n):
+        if count[i] < min_neighbours:
+            continue
+        hi = -np.inf
+        lo = np.inf
+        nan = False
+        for k in range(K):
+            if use[i, k]:
+                wk = weight[i, k]
+                if np.isnan(wk):
+                    nan = True
+                hi = max(hi, wk)
+                lo = min(lo, wk)
+        if nan or not hi > ratio * lo:
+            continue
+        for c in range(3):
+            best = np.inf
+            for a in range(K):
+                if not use[i, a]:
+                    continue
+                acc = 0.0
+                for b in range(K):
+                    if use[i, b]:
+                        acc += abs(cand[i, a, c] - cand[i, b, c]) * weight[i, b]
+                cost[a] = acc
+                if np.isnan(best) or np.isnan(acc) or acc < best:
+                    best = acc if not np.isnan(best) else best
+            lim = best + 1e-9 * (1.0 + best)
+            acc = 0.0
+            m = 0
+            for a in range(K):
+                if use[i, a] and cost[a] <= lim:
+                    acc += cand[i, a, c]
+                    m += 1
+            pred[i, c] = acc / m
+    return pred, count
 
 
 @njit(**JIT_EXACT)

@@ -153,17 +153,9 @@ def triangulate(rig: RigState, uv_c: np.ndarray, valid: np.ndarray, weight: np.n
     ndarray (N, 3)
         NaN rows for points with fewer than 2 valid views.
     """
-    N, S = valid.shape
-    out = np.full((N, 3), np.nan)
-    ok = valid.sum(axis=1) >= 2
-    if not np.any(ok):
-        return out
-    v = valid[ok]
-    uv = np.where(v[..., None], uv_c[ok], 0.0)
-    conf = np.ones(v.shape) if weight is None else np.ascontiguousarray(weight[ok], dtype=float)
-    el = _elongation(None if elong is None else elong[ok], v.shape)
-    out[ok] = dlt_depth_weighted(rig.P(), uv, np.ascontiguousarray(v), conf, el)
-    return out
+    conf = np.ones(valid.shape) if weight is None else np.ascontiguousarray(weight, dtype=float)
+    return dlt_depth_weighted(rig.P(), np.ascontiguousarray(uv_c, dtype=float), np.ascontiguousarray(valid), conf,
+                              _elongation(elong, valid.shape))
 
 
 def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
@@ -192,11 +184,11 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
         Those leave-one-out points.
     """
     P = rig.P()
-    uv = np.where(valid[..., None], uv_c, 0.0)
     if X is None:
         X = triangulate(rig, uv_c, valid, weight, elong)
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
-    Xs = dlt_held_out(P, uv, w, _elongation(elong, valid.shape))   # (S, N, 3) without view s
+    Xs = dlt_held_out(P, np.ascontiguousarray(uv_c, dtype=float), w, _elongation(elong, valid.shape),
+                      np.ascontiguousarray(valid))                     # (S, N, 3) without view s
     # Each leave-one-out point projected into the camera it left out: one batched product for all cameras.
     proj = np.empty(valid.shape + (2,))
     pixels(Xs @ P[:, :, :3].transpose(0, 2, 1), P, proj)

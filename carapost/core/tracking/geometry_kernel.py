@@ -114,13 +114,22 @@ def _solve_into(m, b, out, i):
 
 
 @njit(inline="always", **JIT_EXACT)
-def _view_sums(P, uv, w, el, i, ms, bs, msum, bsum):
-    """Point ``i``'s normal-equation terms of each view into ``ms[s]``, ``bs[s]``, and their sums (view order)."""
+def _view_sums(P, uv, w, el, valid, i, ms, bs, msum, bsum):
+    """Point ``i``'s normal-equation terms of each view into ``ms[s]``, ``bs[s]``, and their sums (view order).
+
+    A view not ``valid`` adds nothing (zero terms; its ``uv`` and ``w`` are not read).
+    """
     for j in range(6):
         msum[j] = 0.0
     for j in range(3):
         bsum[j] = 0.0
     for s in range(w.shape[1]):
+        if not valid[i, s]:
+            for j in range(6):
+                ms[s, j] = 0.0
+            for j in range(3):
+                bs[s, j] = 0.0
+            continue
         _view_terms(P, uv, w, el, i, s, ms, bs)
         for j in range(6):
             msum[j] += ms[s, j]
@@ -133,7 +142,8 @@ def dlt_depth_weighted(P, uv, valid, conf, el):
     """Weighted DLT points ``(n, 3)`` of ``uv`` (n, S, 2), solved twice per point.
 
     The first solve weights each view by its confidence ``conf`` (n, S), the second by ``100 / depth``
-    (depth from the first, at least 1e-3) times it; views not ``valid`` weigh 0.
+    (depth from the first, at least 1e-3) times it; views not ``valid`` add nothing (their ``uv`` may be NaN).
+    NaN for points with fewer than two views.
 
     The inverse depth turns the DLT's algebraic error into the image-plane error (:func:`.geometry.triangulate`).
     The depths are summed here in plain order where numpy's matrix product fused them: the same points to
@@ -147,23 +157,31 @@ def dlt_depth_weighted(P, uv, valid, conf, el):
     msum = np.empty(6)
     bsum = np.empty(3)
     for i in range(n):
+        views = 0
         for s in range(S):
             w[i, s] = conf[i, s] if valid[i, s] else 0.0
-        _view_sums(P, uv, w, el, i, ms, bs, msum, bsum)
+            views += valid[i, s]
+        if views < 2:
+            out[i, 0] = np.nan
+            out[i, 1] = np.nan
+            out[i, 2] = np.nan
+            continue
+        _view_sums(P, uv, w, el, valid, i, ms, bs, msum, bsum)
         _solve_into(msum, bsum, out, i)
         for s in range(S):
             if valid[i, s]:
                 depth = out[i, 0] * P[s, 2, 0] + out[i, 1] * P[s, 2, 1] + out[i, 2] * P[s, 2, 2] + P[s, 2, 3]
                 w[i, s] = 1.0 / max(abs(depth), 1e-3) * 100.0 * conf[i, s]
-        _view_sums(P, uv, w, el, i, ms, bs, msum, bsum)
+        _view_sums(P, uv, w, el, valid, i, ms, bs, msum, bsum)
         _solve_into(msum, bsum, out, i)
     return out
 
 
 @njit(**JIT_EXACT)
-def dlt_held_out(P, uv, w, el):
+def dlt_held_out(P, uv, w, el, valid):
     """Weighted DLT points ``(S, n, 3)`` of ``uv`` (n, S, 2) with view weights ``w`` (n, S) and elongation ``el``
-    (n, S, 3) (:func:`_view_terms`), view ``s`` left out of the sum (all views' sum minus its own)."""
+    (n, S, 3) (:func:`_view_terms`), view ``s`` left out of the sum (all views' sum minus its own); views not
+    ``valid`` add nothing."""
     n, S = w.shape
     out = np.empty((S, n, 3))
     ms = np.empty((S, 6))
@@ -174,7 +192,7 @@ def dlt_held_out(P, uv, w, el):
     b = np.empty(3)
     row = np.empty((1, 3))
     for i in range(n):
-        _view_sums(P, uv, w, el, i, ms, bs, msum, bsum)
+        _view_sums(P, uv, w, el, valid, i, ms, bs, msum, bsum)
         for s in range(S):
             for j in range(6):
                 m[j] = msum[j] - ms[s, j]
