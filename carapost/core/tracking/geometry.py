@@ -77,7 +77,7 @@ class RigState:
         """Corrected pixels ``(N, S, 2)`` of world points ``X`` (N, 3); NaN behind a camera."""
         P = self.P()
         out = np.empty((len(X), len(P), 2))
-        pixels(X @ P[:, :, :3].transpose(0, 2, 1), P, out)
+        pixels(np.ascontiguousarray(X, dtype=float)[None], P, out)
         return out
 
     def correct(self, s: int, raw_xy: np.ndarray) -> np.ndarray:
@@ -191,7 +191,7 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
                       np.ascontiguousarray(valid))                     # (S, N, 3) without view s
     # Each leave-one-out point projected into the camera it left out: one batched product for all cameras.
     proj = np.empty(valid.shape + (2,))
-    pixels(Xs @ P[:, :, :3].transpose(0, 2, 1), P, proj)
+    pixels(Xs, P, proj)
     Xs = Xs.transpose(1, 0, 2)
     err = np.empty(valid.shape)
     pixel_errors(proj, uv_c, valid, -1.0, err)

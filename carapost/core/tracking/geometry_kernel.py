@@ -14,10 +14,10 @@ multiply-add, no reassociation), so the results are the same to the bit:
 * the views are summed in order from 0.0 (as ``ndarray.sum`` over a short middle axis);
 * ``M x = b`` is solved by the adjugate, NaN where ``|det| <= 1e-300``.
 
-The matrix products of the projections stay numpy's.  Since session 22 the
-depth weights of :func:`.geometry.triangulate`'s second solve are worked out
-here as well (:func:`dlt_depth_weighted`): the tracks stored (float32) came out
-the same.
+Since session 22 the depth weights of :func:`.geometry.triangulate`'s second
+solve and the projections' matrix products are summed here too, in plain order
+where numpy's products fused multiply-adds: the float64 results differ by units
+in the last place, and the tracks stored (float32) came out the same.
 """
 from __future__ import annotations
 
@@ -205,22 +205,24 @@ def dlt_held_out(P, uv, w, el, valid):
 
 
 @njit(**JIT_EXACT)
-def pixels(m, P, out):
-    """Corrected pixels ``out`` (N, S, 2) of ``m`` (S, N, 3), the points' ``X @ P[s, :, :3].T``.
+def pixels(X, P, out):
+    """Corrected pixels ``out`` (N, S, 2) of points ``X`` (1 or S, N, 3) through the projection matrices ``P``.
 
-    Adds each camera's translation column (``h = m + P[s, :, 3]``) and divides by ``h[2]``; NaN where
-    ``h[2] <= 1e-6`` (behind the camera) or NaN, as :meth:`.geometry.RigState.project` did with arrays.
+    ``X[0]`` is seen by every camera, or ``X[s]`` by camera ``s`` alone.  ``h = P[s, :, :3] X + P[s, :, 3]``
+    (the product summed in plain order, then the translation added) divided by ``h[2]``; NaN where
+    ``h[2] <= 1e-6`` (behind the camera) or NaN.
     """
-    S, N = m.shape[0], m.shape[1]
+    S, N = P.shape[0], X.shape[1]
     for s in range(S):
-        t0 = P[s, 0, 3]
-        t1 = P[s, 1, 3]
-        t2 = P[s, 2, 3]
+        q = s if X.shape[0] > 1 else 0
         for i in range(N):
-            z = m[s, i, 2] + t2
+            x0 = X[q, i, 0]
+            x1 = X[q, i, 1]
+            x2 = X[q, i, 2]
+            z = (P[s, 2, 0] * x0 + P[s, 2, 1] * x1 + P[s, 2, 2] * x2) + P[s, 2, 3]
             if z > 1e-6:
-                out[i, s, 0] = (m[s, i, 0] + t0) / z
-                out[i, s, 1] = (m[s, i, 1] + t1) / z
+                out[i, s, 0] = ((P[s, 0, 0] * x0 + P[s, 0, 1] * x1 + P[s, 0, 2] * x2) + P[s, 0, 3]) / z
+                out[i, s, 1] = ((P[s, 1, 0] * x0 + P[s, 1, 1] * x1 + P[s, 1, 2] * x2) + P[s, 1, 3]) / z
             else:
                 out[i, s, 0] = np.nan
                 out[i, s, 1] = np.nan
