@@ -15,6 +15,15 @@ from numba import njit
 from ..jit import JIT_EXACT
 
 
+@njit(inline="always", **JIT_EXACT)
+def _offset(X, C, i, s):
+    """The vector from camera ``s``'s centre to point ``i`` and its squared length."""
+    d0 = X[i, 0] - C[s, 0]
+    d1 = X[i, 1] - C[s, 1]
+    d2 = X[i, 2] - C[s, 2]
+    return d0, d1, d2, d0 * d0 + d1 * d1 + d2 * d2
+
+
 @njit(**JIT_EXACT)
 def depth_spread(X, C, f, valid, u, mm):
     """Unit mean viewing direction ``u`` (N, 3) and depth error per px ``mm`` (N,) of points ``X`` (N, 3).
@@ -34,10 +43,8 @@ def depth_spread(X, C, f, valid, u, mm):
         for s in range(S):
             if not valid[i, s]:
                 continue
-            d0 = X[i, 0] - C[s, 0]
-            d1 = X[i, 1] - C[s, 1]
-            d2 = X[i, 2] - C[s, 2]
-            dist = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            d0, d1, d2, dist2 = _offset(X, C, i, s)
+            dist = np.sqrt(dist2)
             dirs[n, 0] = d0 / dist
             dirs[n, 1] = d1 / dist
             dirs[n, 2] = d2 / dist
@@ -80,10 +87,7 @@ def view_information(X, C, f, valid, weight, out):
         for s in range(S):
             if not valid[i, s]:
                 continue
-            d0 = X[i, 0] - C[s, 0]
-            d1 = X[i, 1] - C[s, 1]
-            d2 = X[i, 2] - C[s, 2]
-            dist2 = d0 * d0 + d1 * d1 + d2 * d2
+            d0, d1, d2, dist2 = _offset(X, C, i, s)
             g = f[s] * f[s] / dist2 * weight[i, s] * weight[i, s]
             dist = np.sqrt(dist2)
             r0 = d0 / dist
