@@ -461,7 +461,7 @@ class FrameTracker:
         #    elastic prediction from the neighbours' predictions for lost points.
         tracked = finite_rows(self.X)
         Xp = np.where(np.isfinite(self.V), self.X + self.V, self.X)
-        speed = np.linalg.norm(np.nan_to_num(self.V, nan=0.0), axis=1)    # mm on the previous frame
+        speed = np.linalg.norm(np.where(np.isnan(self.V), 0.0, self.V), axis=1)    # mm on the previous frame
         lost = ~tracked
         if np.any(lost):
             el = self._predict(Xp, tracked, lost)
@@ -507,7 +507,7 @@ class FrameTracker:
         uv_c[r, s] = fd.xy_all[g]
         Xa = triangulate(rig, uv_c, valid)
         err = reprojection(rig, Xa, uv_c, valid)
-        anchor = (valid.sum(1) >= 2) & np.all(np.nan_to_num(err, nan=0.0) <= p.max_allowed_2d_projection_error, axis=1)
+        anchor = (valid.sum(1) >= 2) & ~np.any(err > p.max_allowed_2d_projection_error, axis=1)     # NaN: no view
         doubtful, el = self._doubtful_pairs(Xa, anchor, valid, Xp, speed)
         anchor &= ~doubtful
         # Everything else starts again in pass 2 with better predictions.

@@ -195,7 +195,7 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     Xs = Xs.transpose(1, 0, 2)
     err = np.empty(valid.shape)
     pixel_errors(proj, uv_c, valid, -1.0, err)
-    return np.nan_to_num(err, nan=-1.0), Xs
+    return np.where(np.isnan(err), -1.0, err), Xs
 
 
 def reprojection(rig: RigState, X: np.ndarray, uv_c: np.ndarray, valid: np.ndarray) -> np.ndarray:
