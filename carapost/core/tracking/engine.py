@@ -139,7 +139,8 @@ ELONG_SLOPE = 8.0
 
 
 def elongation(rec: np.ndarray) -> np.ndarray:
-    """``(cos, sin, k)`` of detections ``rec`` (records, or their fields by name; their major axis' direction and its weight, :data:`ELONG_SLOPE`)."""
+    """``(cos, sin, k)`` of detections ``rec`` (records, or their fields by name): their major axis' direction
+    and its weight (:data:`ELONG_SLOPE`)."""
     ratio = rec["minor"].astype(float) / np.maximum(rec["major"].astype(float), 1e-6)
     a = np.radians(rec["angle"].astype(float))
     k = 1.0 / (1.0 + ELONG_SLOPE * np.maximum(ELONG_FROM - ratio, 0.0) ** 2)

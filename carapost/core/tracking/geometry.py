@@ -189,7 +189,7 @@ def held_out_errors(rig: RigState, uv_c: np.ndarray, valid: np.ndarray,
     w = _depth_weights(P, X, valid) * (1.0 if weight is None else weight)
     Xs = dlt_held_out(P, np.ascontiguousarray(uv_c, dtype=float), w, _elongation(elong, valid.shape),
                       np.ascontiguousarray(valid))                     # (S, N, 3) without view s
-    # Each leave-one-out point projected into the camera it left out: one batched product for all cameras.
+    # Each leave-one-out point projected into the camera it left out, all cameras in one kernel call.
     proj = np.empty(valid.shape + (2,))
     pixels(Xs, P, proj)
     Xs = Xs.transpose(1, 0, 2)
@@ -278,5 +278,6 @@ def information(rig: RigState, X: np.ndarray, valid: np.ndarray, weight: np.ndar
     """
     out = np.empty((len(X), 3, 3))
     w = np.ones(valid.shape) if weight is None else np.ascontiguousarray(weight, dtype=float)
-    view_information(np.ascontiguousarray(X, dtype=float), rig.C, rig.K[:, 0, 0].copy(), np.ascontiguousarray(valid), w, out)
+    view_information(np.ascontiguousarray(X, dtype=float), rig.C, rig.K[:, 0, 0].copy(), np.ascontiguousarray(valid),
+                     w, out)
     return out
