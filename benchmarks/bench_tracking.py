@@ -21,6 +21,8 @@ from carapost.core.tracking.geometry import RigState, reprojection, triangulate
 from carapost.core.tracking.synthetic_take import initialise, make_take
 
 TARGET_FPS = 120.0
+#: Timed runs per tracker (the best counts).
+RUNS = 3
 
 
 def nearest_neighbour_track(project, start, frames, radius=35.0):
@@ -67,18 +69,23 @@ def run(quick: bool = False) -> list[dict]:
     sc = make_take(160, frames, seed=3)
     initialise(sc, 0)
     base = copy.deepcopy(sc)
-    t0 = time.perf_counter()
-    cmd = track(sc.project, 0, +1)
-    dt = time.perf_counter() - t0
-    cmd.do(sc.project)
-    q = evaluate(sc, 0, range(1, frames))
-    dt_nn = nearest_neighbour_track(base.project, 0, range(1, frames))
-    qn = evaluate(base, 0, range(1, frames))
+    # Speed: best of RUNS on fresh copies, ours and the baseline alike (other jobs on the machine only
+    # ever slow a run down; bench_blobs does the same).  Quality: the last run of each.
+    dt = dt_nn = np.inf
+    for _ in range(RUNS):
+        ours, theirs = copy.deepcopy(sc), copy.deepcopy(base)
+        t0 = time.perf_counter()
+        cmd = track(ours.project, 0, +1)
+        dt = min(dt, time.perf_counter() - t0)
+        dt_nn = min(dt_nn, nearest_neighbour_track(theirs.project, 0, range(1, frames)))
+    cmd.do(ours.project)
+    q = evaluate(ours, 0, range(1, frames))
+    qn = evaluate(theirs, 0, range(1, frames))
     fps = (frames - 1) / dt
     res = [
         {"benchmark": "tracking speed, 160 points x 4 cameras", "value": round(fps, 1), "unit": "frames/s",
          "target": f">= {TARGET_FPS:g}", "pass": fps >= TARGET_FPS, "baseline_nearest_neighbour": round((frames - 1) / dt_nn, 1),
-         "warm_up_s": round(warm, 2)},
+         "runs": RUNS, "warm_up_s": round(warm, 2)},
         {"benchmark": "coverage (2+ camera marker-frames with a correct 3D point)", "value": round(q["coverage"], 5),
          "unit": "fraction", "target": ">= 0.995", "pass": q["coverage"] >= 0.995,
          "baseline_nearest_neighbour": round(qn["coverage"], 5)},
