@@ -180,9 +180,11 @@ def test_fuse_depth_is_the_information_weighted_mean(rig):
     info[9] = np.nan
     rows = rng.random(n) > 0.1
     sd = rng.uniform(0.05, 0.5, n)
-    got = fuse_depth(X, info, pred, sd, rows)
+    post = np.empty(n)
+    got = fuse_depth(X, info, pred, sd, rows, post)
     Jm = info / DEPTH_PX ** 2
     want = X.copy()
+    want_post = np.full(n, np.inf)
     moved = 0
     for i in range(n):
         if not (rows[i] and np.all(np.isfinite(pred[i])) and np.all(np.isfinite(info[i]))):
@@ -193,9 +195,11 @@ def test_fuse_depth_is_the_information_weighted_mean(rig):
         mean = np.linalg.solve(Jm[i] + Jp, Jm[i] @ X[i] + Jp @ pred[i])
         if md2 <= 3.0 * FUSE_GATE ** 2:
             want[i] = mean
+            want_post[i] = np.max(np.diag(np.linalg.inv(Jm[i] + Jp)))
             moved += 1
     assert moved > 50
     assert np.allclose(got, want, rtol=0, atol=1e-9, equal_nan=True)
+    assert np.allclose(post, want_post, rtol=1e-9, atol=0) and np.isinf(post[~rows]).all()
     assert np.array_equal(got[~rows], X[~rows]) and np.array_equal(got[[5, 9]], X[[5, 9]])
 
 

@@ -105,14 +105,16 @@ def view_information(X, C, f, valid, weight, out):
 
 
 @njit(**JIT_EXACT)
-def fuse_points(X, info, pred, var, rows, info_scale, gate2, out):
+def fuse_points(X, info, pred, var, rows, info_scale, gate2, out, post):
     """``out`` = ``X`` with each row of ``rows`` moved to its information-weighted mean with ``pred``.
 
     The measurement's information is ``info[i] * info_scale``, the prediction's ``I / var[i]``.  The
     disagreement's squared Mahalanobis distance under both covariances is
     ``dxᵀ Jm dx - (Jm dx)ᵀ (Jm + Jp)⁻¹ Jm dx`` (Woodbury; ``Jm`` alone is singular for two parallel rays);
     rows where it exceeds ``gate2``, or with a NaN prediction or information, are left as measured.
-    The mean is ``X + (Jm + Jp)⁻¹ Jp (pred - X)``.
+    The mean is ``X + (Jm + Jp)⁻¹ Jp (pred - X)``.  ``post[i]``: the mean's variance, the largest diagonal
+    element of ``(Jm + Jp)⁻¹`` (mm², an upper bound's stand-in for its largest eigenvalue; inf where not
+    averaged).
     """
     N = X.shape[0]
     J = np.empty((3, 3))
@@ -121,6 +123,7 @@ def fuse_points(X, info, pred, var, rows, info_scale, gate2, out):
         out[i, 0] = X[i, 0]
         out[i, 1] = X[i, 1]
         out[i, 2] = X[i, 2]
+        post[i] = np.inf
         if not rows[i]:
             continue
         finite = np.isfinite(pred[i, 0]) and np.isfinite(pred[i, 1]) and np.isfinite(pred[i, 2])
@@ -156,6 +159,7 @@ def fuse_points(X, info, pred, var, rows, info_scale, gate2, out):
         md2 = dx0 * j0 + dx1 * j1 + dx2 * j2 - (j0 * s0 + j1 * s1 + j2 * s2)
         if not md2 <= gate2:
             continue
+        post[i] = max(c00, max(c11, c22)) / det
         # The step (Jm + Jp)^-1 Jp (pred - X) = -(Jm + Jp)^-1 dx / var.
         out[i, 0] -= (c00 * dx0 + c01 * dx1 + c02 * dx2) / det / var[i]
         out[i, 1] -= (c01 * dx0 + c11 * dx1 + c12 * dx2) / det / var[i]

@@ -131,7 +131,8 @@ def weights(motion: np.ndarray) -> np.ndarray:
 
 
 def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarray,
-            min_neighbours: int = MIN_NEIGHBOURS, weight: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+            min_neighbours: int = MIN_NEIGHBOURS, weight: np.ndarray | None = None,
+            rigid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Median over available neighbours of (neighbour position + offset).
 
     Parameters
@@ -146,6 +147,9 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
     weight : ndarray (n, K), optional
         Per-neighbour weights (:func:`weights`): a weighted median per
         coordinate; None gives every neighbour the same say.
+    rigid : ndarray (n,) bool, optional
+        Rows predicted by their neighbours' rigid motion instead (:func:`_rigid_fit`; rows with fewer
+        than four usable neighbours keep the median): points whose offsets are from frames ago.
 
     Returns
     -------
@@ -155,6 +159,11 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
         Neighbours used.
     """
     X = np.ascontiguousarray(X, dtype=float)
+    if rigid is not None and np.any(rigid):
+        pred, count = predict(X, available, nb, off, min_neighbours, weight)
+        w = np.ones(nb.shape) if weight is None else np.ascontiguousarray(weight, dtype=float)
+        _rigid_fit(X, available, nb, off, w, np.ascontiguousarray(rigid), pred)
+        return pred, count
     if weight is None:
         pred, _use, _cand, count = _votes_median(X, available, nb, off, min_neighbours)
         return pred, count
@@ -262,6 +271,65 @@ def _votes_weighted_median(X, available, nb, off, min_neighbours, weight, ratio)
                     m += 1
             pred[i, c] = acc / m
     return pred, count
+
+
+@njit(**JIT_EXACT)
+def _rigid_fit(X, available, nb, off, weight, rows, pred):
+    """Into ``pred``, for ``rows`` with 4+ usable neighbours: where the neighbours' rigid motion takes the point.
+
+    The offsets place each neighbour relative to the point as it was when they were last refreshed
+    (``-off``); the rotation and shift that best carry those places onto the neighbours' positions now
+    (weighted least squares, Kabsch's SVD, no reflection) carry the point too.  A point lost for a while
+    keeps the offsets of its loss: a median of translated votes leaves it behind a turning jaw.
+    """
+    n, K = nb.shape
+    q = np.empty((K, 3))
+    x = np.empty((K, 3))
+    w = np.empty(K)
+    for i in range(n):
+        if not rows[i]:
+            continue
+        m = 0
+        for k in range(K):
+            j = nb[i, k]
+            if j < 0 or not available[j]:
+                continue
+            ok = True
+            for c in range(3):
+                if not (np.isfinite(off[i, k, c]) and np.isfinite(X[j, c])):
+                    ok = False
+            if not ok:
+                continue
+            for c in range(3):
+                q[m, c] = -off[i, k, c]
+                x[m, c] = X[j, c]
+            w[m] = weight[i, k]
+            m += 1
+        if m < 4:
+            continue
+        ws = 0.0
+        qc = np.zeros(3)
+        xc = np.zeros(3)
+        for a in range(m):
+            ws += w[a]
+            for c in range(3):
+                qc[c] += w[a] * q[a, c]
+                xc[c] += w[a] * x[a, c]
+        for c in range(3):
+            qc[c] /= ws
+            xc[c] /= ws
+        H = np.zeros((3, 3))
+        for a in range(m):
+            for r in range(3):
+                for c in range(3):
+                    H[r, c] += w[a] * (q[a, r] - qc[r]) * (x[a, c] - xc[c])
+        U, S, Vt = np.linalg.svd(H)
+        R = Vt.T @ U.T
+        if np.linalg.det(R) < 0:
+            Vt[2, :] = -Vt[2, :]
+            R = Vt.T @ U.T
+        for c in range(3):
+            pred[i, c] = xc[c] - (R[c, 0] * qc[0] + R[c, 1] * qc[1] + R[c, 2] * qc[2])
 
 
 @njit(**JIT_EXACT)

@@ -278,9 +278,15 @@ PRED_MM_PER_MM = 0.025
 #: A measurement farther than this many standard deviations (per axis) from the prediction is not averaged
 #: with it: a wrong or biased blob, for the clamp and Remove Bad 3D Points to judge.
 FUSE_GATE = 3.0
+#: The neighbours' prediction of a point averaged on the frame before is as certain as that average was, plus
+#: this fraction of ``PRED_MM_PER_MM`` x spacing for a frame's change (never less certain than that product
+#: alone, nor more than the neighbours' spread allows): the average becomes a filter over frames
+#: (docs/tracking.md, "Session 22: the prediction's certainty carried from frame to frame").  0: off.
+CARRIED_Q = 0.6
 
 
-def fuse_depth(X: np.ndarray, info: np.ndarray, pred: np.ndarray, pred_sd, rows: np.ndarray) -> np.ndarray:
+def fuse_depth(X: np.ndarray, info: np.ndarray, pred: np.ndarray, pred_sd, rows: np.ndarray,
+               post: np.ndarray | None = None) -> np.ndarray:
     """``X`` with each of ``rows`` averaged with the neighbours' prediction, each weighted by its certainty.
 
     The measured point is certain to ``info / DEPTH_PX²`` (:func:`.geometry.information`):
@@ -299,12 +305,16 @@ def fuse_depth(X: np.ndarray, info: np.ndarray, pred: np.ndarray, pred_sd, rows:
         Standard deviation (mm) of each prediction.
     rows : ndarray (N,) bool
         Points to average (measured, by two or more views).
+    post : ndarray (N,), optional
+        Filled with each average's variance (mm², inf where a point is left as measured).
     """
     out = np.empty_like(X)
     var = np.ascontiguousarray(np.broadcast_to(np.asarray(pred_sd, float) ** 2, (len(X),)))
+    if post is None:
+        post = np.empty(len(X))
     fuse_points(np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(info, dtype=float),
                 np.ascontiguousarray(pred, dtype=float), var, np.ascontiguousarray(rows), 1.0 / DEPTH_PX ** 2,
-                3.0 * FUSE_GATE ** 2, out)
+                3.0 * FUSE_GATE ** 2, out, post)
     return out
 
 
@@ -361,6 +371,10 @@ class FrameTracker:
         self._el = round_views((self.N, self.S))            # and their elongation (:func:`elongation`)
         # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
         self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
+        # The variance (mm²) of each point's average with its prediction on the last frame (inf: none; see
+        # CARRIED_Q), and this frame's, kept until the frame's end decides which points carry it on.
+        self.post_var = np.full(self.N, np.inf)
+        self._post_new = np.full(self.N, np.inf)
         # Each view's last blob sample (frame, raw px): patches are matched against the marker's
         # look there, not against the previous frame's patch, so that they cannot drift step by step.
         blob0 = finite_rows(self.size) & finite_rows(self.uv_prev)
@@ -668,6 +682,9 @@ class FrameTracker:
         elastic.update_offsets(self.off, self.nb, X, (status == ST_RECONSTRUCTED) & ~clamped & ~tentative,
                                self.motion)
         self.tentative = tentative
+        # Carried on only by points measured on both frames, not clamped and not a tentative return.
+        self.post_var = np.where((status == ST_RECONSTRUCTED) & ~clamped & ~tentative & tracked, self._post_new,
+                                 np.inf)
         self.w = elastic.weights(self.motion)
         self.uv_prev = uv_raw.copy()
         blob = src == SRC_DETECTION
@@ -737,7 +754,8 @@ class FrameTracker:
 
     def _predict(self, X, available, rows):
         """Elastic prediction of ``rows`` only (``X``, ``available``: every point)."""
-        return elastic.predict(X, available, self.nb[rows], self.off[rows], weight=self.w[rows])[0]
+        return elastic.predict(X, available, self.nb[rows], self.off[rows], weight=self.w[rows],
+                               rigid=self.unseen[rows] > 0)[0]      # offsets from before a loss
 
     def _patch_track(self, frame, fd, rig, X2, r2, uv2, skip, src, uv_c, uv_raw, score, det):
         """Patch views (in place) for the recently blob-seen views not in ``skip`` (N, S)."""
@@ -1074,8 +1092,11 @@ class FrameTracker:
         if len(rows):
             spread[rows] = self._vote_spread(X, has_firm[rows], firm, voting, rows, pred[rows], u[rows])
         Xm = X
-        X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred,
-                       np.maximum(self.pred_sd, spread), measured)
+        sd = np.maximum(self.pred_sd, spread)
+        if CARRIED_Q > 0:
+            carried = np.sqrt(self.post_var + (CARRIED_Q * self.pred_sd) ** 2)
+            sd = np.maximum(spread, np.minimum(self.pred_sd, carried))
+        X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred, sd, measured, self._post_new)
         rows = np.flatnonzero(narrow & finite_rows(pred))
         if len(rows) == 0:
             return X, pred, clamped
