@@ -120,6 +120,7 @@ def refine_rig(K, R, C, X, obs, good, active, iterations, huber):
     d = np.empty(6)
     w = np.empty((1, 3))
     Q = np.empty((1, 3, 3))
+    Rn = np.empty((3, 3))
     for _ in range(iterations):
         biggest = 0.0
         for s in range(S):
@@ -132,7 +133,6 @@ def refine_rig(K, R, C, X, obs, good, active, iterations, huber):
                 biggest = max(biggest, abs(d[a]))
             w[0, 0], w[0, 1], w[0, 2] = d[0], d[1], d[2]
             rotation_matrices(w, Q)
-            Rn = np.empty((3, 3))
             for a in range(3):
                 for b in range(3):
                     Rn[a, b] = Q[0, a, 0] * R[s, 0, b] + Q[0, a, 1] * R[s, 1, b] + Q[0, a, 2] * R[s, 2, b]
