@@ -371,8 +371,9 @@ class FrameTracker:
         # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
         self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
         # The variance (mm²) of each point's average with its prediction on the last frame (inf: none; see
-        # CARRIED_Q).
+        # CARRIED_Q), and this frame's (:meth:`_steady_depth`), until the frame's end decides who carries it on.
         self.post_var = np.full(self.N, np.inf)
+        self._post_new = np.full(self.N, np.inf)
         # Each view's last blob sample (frame, raw px): patches are matched against the marker's
         # look there, not against the previous frame's patch, so that they cannot drift step by step.
         blob0 = finite_rows(self.size) & finite_rows(self.uv_prev)
@@ -611,7 +612,7 @@ class FrameTracker:
             X = triangulate(rig, uv_c, valid, *self._view_weights(src))
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = finite_rows(X)
-        X, pred, clamped, post = self._steady_depth(rig, X, valid, measured, self._view_weights(src)[0])
+        X, pred, clamped = self._steady_depth(rig, X, valid, measured, self._view_weights(src)[0])
         X = self._patch_depth(rig, X, uv_c, src, measured, motion)
         if p.remove_bad_3d_points and np.any(measured):
             # Three or more agreeing blob views outweigh a prediction: a jaw speeding up from 3.6 to 9 mm a
@@ -681,7 +682,8 @@ class FrameTracker:
                                self.motion)
         self.tentative = tentative
         # Carried on only by points measured on both frames, not clamped and not a tentative return.
-        self.post_var = np.where((status == ST_RECONSTRUCTED) & ~clamped & ~tentative & tracked, post, np.inf)
+        self.post_var = np.where((status == ST_RECONSTRUCTED) & ~clamped & ~tentative & tracked, self._post_new,
+                                 np.inf)
         self.w = elastic.weights(self.motion)
         self.uv_prev = uv_raw.copy()
         blob = src == SRC_DETECTION
@@ -1052,9 +1054,9 @@ class FrameTracker:
             they suffice, else from all ``measured``).
         clamped : ndarray (N,) bool
             Points whose measured depth was beyond the bound (their offsets are not refreshed).
-        post : ndarray (N,)
-            The variance (mm²) of each point's average with the prediction (inf where not averaged),
-            which the next frame's prediction carries (:data:`CARRIED_Q`).
+
+        Each average's variance (mm², inf where not averaged) goes to ``self._post_new``: the next frame's
+        prediction carries it (:data:`CARRIED_Q`).
 
         Every measured point's position is first averaged with the prediction, each weighted by
         its certainty (:func:`fuse_depth`); the bound applies to the average.  A narrow point more
@@ -1096,11 +1098,11 @@ class FrameTracker:
         if CARRIED_Q > 0:
             carried = np.sqrt(self.post_var + (CARRIED_Q * self.pred_sd) ** 2)
             sd = np.maximum(spread, np.minimum(self.pred_sd, carried))
-        post = np.empty(len(X))
-        X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred, sd, measured, post)
+        X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred, sd, measured,
+                       self._post_new)
         rows = np.flatnonzero(narrow & finite_rows(pred))
         if len(rows) == 0:
-            return X, pred, clamped, post
+            return X, pred, clamped
         along = np.einsum("ni,ni->n", X[rows] - pred[rows], u[rows])
         measured_along = np.einsum("ni,ni->n", Xm[rows] - pred[rows], u[rows])
         bound = np.maximum(NARROW_DEPTH_MM, spread[rows])
@@ -1119,7 +1121,7 @@ class FrameTracker:
         X = X.copy()
         X[rows] -= excess[:, None] * u[rows]
         clamped[rows] = held
-        return X, pred, clamped, post
+        return X, pred, clamped
 
     def _vote_spread(self, X, use_firm, firm, voting, rows, pred, u):
         """Weighted robust spread (mm) along ``u`` of the neighbour votes behind ``pred`` for ``rows``.
