@@ -22,6 +22,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from ..jit import JIT_EXACT
+from ..stabilize import kabsch
 
 #: Neighbours per point.
 K_NEIGHBOURS = 6
@@ -161,8 +162,7 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
     X = np.ascontiguousarray(X, dtype=float)
     if rigid is not None and np.any(rigid):
         pred, count = predict(X, available, nb, off, min_neighbours, weight)
-        w = np.ones(nb.shape) if weight is None else np.ascontiguousarray(weight, dtype=float)
-        _rigid_fit(X, available, nb, off, w, np.ascontiguousarray(rigid), pred)
+        _rigid_fit(X, available, nb, off, weight, np.flatnonzero(rigid), pred)
         return pred, count
     if weight is None:
         pred, _use, _cand, count = _votes_median(X, available, nb, off, min_neighbours)
@@ -273,63 +273,23 @@ def _votes_weighted_median(X, available, nb, off, min_neighbours, weight, ratio)
     return pred, count
 
 
-@njit(**JIT_EXACT)
-def _rigid_fit(X, available, nb, off, weight, rows, pred):
-    """Into ``pred``, for ``rows`` with 4+ usable neighbours: where the neighbours' rigid motion takes the point.
+def _rigid_fit(X, available, nb, off, weight, rows, pred) -> None:
+    """Into ``pred[rows]``, for rows with 4+ usable neighbours: where the neighbours' rigid motion takes the point.
 
     The offsets place each neighbour relative to the point as it was when they were last refreshed
-    (``-off``); the rotation and shift that best carry those places onto the neighbours' positions now
-    (weighted least squares, Kabsch's SVD, no reflection) carry the point too.  A point lost for a while
-    keeps the offsets of its loss: a median of translated votes leaves it behind a turning jaw.
+    (``-off``, the point at the origin); the rotation and shift that best carry those places onto the
+    neighbours' positions now (weighted least squares, :func:`..stabilize.kabsch`) carry the point too, to
+    the shift.  A point lost for a while keeps the offsets of its loss: a median of translated votes leaves
+    it behind a turning jaw.
     """
-    n, K = nb.shape
-    q = np.empty((K, 3))
-    x = np.empty((K, 3))
-    w = np.empty(K)
-    for i in range(n):
-        if not rows[i]:
-            continue
-        m = 0
-        for k in range(K):
-            j = nb[i, k]
-            if j < 0 or not available[j]:
-                continue
-            ok = True
-            for c in range(3):
-                if not (np.isfinite(off[i, k, c]) and np.isfinite(X[j, c])):
-                    ok = False
-            if not ok:
-                continue
-            for c in range(3):
-                q[m, c] = -off[i, k, c]
-                x[m, c] = X[j, c]
-            w[m] = weight[i, k]
-            m += 1
-        if m < 4:
-            continue
-        ws = 0.0
-        qc = np.zeros(3)
-        xc = np.zeros(3)
-        for a in range(m):
-            ws += w[a]
-            for c in range(3):
-                qc[c] += w[a] * q[a, c]
-                xc[c] += w[a] * x[a, c]
-        for c in range(3):
-            qc[c] /= ws
-            xc[c] /= ws
-        H = np.zeros((3, 3))
-        for a in range(m):
-            for r in range(3):
-                for c in range(3):
-                    H[r, c] += w[a] * (q[a, r] - qc[r]) * (x[a, c] - xc[c])
-        U, S, Vt = np.linalg.svd(H)
-        R = Vt.T @ U.T
-        if np.linalg.det(R) < 0:
-            Vt[2, :] = -Vt[2, :]
-            R = Vt.T @ U.T
-        for c in range(3):
-            pred[i, c] = xc[c] - (R[c, 0] * qc[0] + R[c, 1] * qc[1] + R[c, 2] * qc[2])
+    j = nb[rows]
+    there = np.where((j >= 0)[..., None], X[np.maximum(j, 0)], np.nan)
+    then = -off[rows]
+    usable = (j >= 0) & available[np.maximum(j, 0)] & np.isfinite(there).all(-1) & np.isfinite(then).all(-1)
+    w = np.ones(j.shape) if weight is None else weight[rows]
+    fit = kabsch(then, there, np.where(usable, w, 0.0))
+    enough = usable.sum(axis=1) >= 4
+    pred[rows[enough]] = fit[enough, :, 3]
 
 
 @njit(**JIT_EXACT)
