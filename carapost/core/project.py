@@ -190,7 +190,7 @@ class Project:
                     np.asarray(c.rotation, float), np.asarray(c.position, float))
             put(self.rig.quat, self.rig.position, self.rig.solved)
         if self.brim is not None:
-            put(self.brim.name, self.brim.markers, self.brim.svg)
+            put(self.brim.name, self.brim.markers, self.brim.svg, self.brim.radius)
         put(self.labels, [(s.a, s.b, s.color) for s in self.sticks], self.rom_path, self.active_range,
             self.view_range, self.channel_selection, self.properties.to_dict(), self.pico_blob_parameters)
         if self.stabilization is not None:

@@ -321,7 +321,7 @@ def initialize_from_rom(project: Project, frame: int, brim_only: bool = False, i
     uv, det = R.match_brim(cams0, rf.markers, det_xy, used, rp["rom_brim_point_tracking_distance"])
     try:
         cams, uv, det, _rms = R.robust_rig_fit(cams0, rf.markers, uv, det)
-        sol = solve_brim(cams, rf.markers, uv, det_xy, used, det)
+        sol = solve_brim(cams, rf.markers, uv, det_xy, used, det, rom.brim.radius)
     except CaraError as e:
         raise CaraError(f"frame {frame}: {e}; increase ROM Brim Point Tracking Distance "
                         f"({rp['rom_brim_point_tracking_distance']:g} px), choose a closer ROM Frame Index, or "
@@ -335,7 +335,7 @@ def initialize_from_rom(project: Project, frame: int, brim_only: bool = False, i
     pre: list[Command] = []
     new_brim = project.brim is None or not np.array_equal(np.asarray(project.brim.markers), rf.markers)
     if new_brim:
-        pre.append(SetBrim(Brim(rom.brim.name, rf.markers.copy(), rom.brim.svg), name="Set Calibration Brim"))
+        pre.append(SetBrim(Brim(rom.brim.name, rf.markers.copy(), rom.brim.svg, rom.brim.radius.copy()), name="Set Calibration Brim"))
     if project.rig is None:
         pre.append(SetRig(CameraRig([c.copy() for c in rom.rig.cameras], project.frame_count), name="Set Cameras"))
     bp = {} if new_brim else brim_points(project)
@@ -405,7 +405,7 @@ def _face(project, frame, state, rf, sol, recs, rp, report):
 
     def track_from(X0):
         return FrameTracker(RigState(sol.cameras), X0, np.full((N, S, 2), np.nan), rf.size, rf.markers,
-                            params).step(frame, recs)
+                            params, brim_radius=state.rom.brim.radius).step(frame, recs)
 
     res, X_ref = track_from(rf.X), rf.X
     # The face may sit elsewhere in the brim than in the ROM (the helmet put on again): dense markers

@@ -3,7 +3,9 @@
 Every ``<circle>`` in document order is a brim marker, index 0, 1, ...; its
 centre after the SVG transforms, in the user units of the ``viewBox``, is in
 millimetres.  Marker ``i`` sits at world ``(cx_i, cy_i, 0)``: the brim defines
-the world frame, with no flip of the SVG y axis.
+the world frame, with no flip of the SVG y axis.  Its ``r`` (scaled by the
+transforms) is the printed dot's radius, which the camera solves use to take
+the perspective offset of the dot's image off its detections.
 """
 from __future__ import annotations
 
@@ -85,7 +87,7 @@ def read_brim_svg(path: str | Path) -> Brim:
         raise CaraError(f"not valid SVG/XML: {e}", path) from None
     if etree.QName(root).localname != "svg":
         raise CaraError("not an SVG file (the root element is not <svg>)", path)
-    centres = []
+    centres, radii = [], []
     try:
         for el in root.iter():
             if not isinstance(el.tag, str) or etree.QName(el).localname != "circle":
@@ -96,25 +98,31 @@ def read_brim_svg(path: str | Path) -> Brim:
                 m = m @ parse_transform(node.get("transform"))
             c = m @ np.array([_length(el.get("cx")), _length(el.get("cy")), 1.0])
             centres.append(c[:2])
+            # A circle under a non-uniform scale is an ellipse: its radius is that of the same area.
+            radii.append(_length(el.get("r")) * np.sqrt(abs(np.linalg.det(m[:2, :2]))))
     except ValueError as e:
         raise CaraError(f"cannot read a circle: {e}", path) from None
     if len(centres) < 4:
         raise CaraError(f"has {len(centres)} <circle> elements; a calibration brim needs at least 4", path)
     markers = np.zeros((len(centres), 3))
     markers[:, :2] = centres
-    return Brim(path.name, markers, svg=data.decode("utf-8", "replace"))
+    return Brim(path.name, markers, svg=data.decode("utf-8", "replace"), radius=radii)
 
 
 def brim_to_svg(brim: Brim, radius: float = 1.5) -> str:
-    """An SVG of a brim following the same convention (used for the default brims and the sample take)."""
+    """An SVG of a brim following the same convention (used for the default brims and the sample take).
+
+    Dots of unknown radius (0) are drawn with ``radius``.
+    """
     xy = brim.markers[:, :2]
-    lo = xy.min(axis=0) - 5 * radius
-    hi = xy.max(axis=0) + 5 * radius
+    r = np.where(brim.radius > 0, brim.radius, radius)
+    lo = xy.min(axis=0) - 5 * r.max()
+    hi = xy.max(axis=0) + 5 * r.max()
     w, h = hi - lo
     lines = [f'<svg xmlns="{_SVG_NS}" width="{w:.3f}mm" height="{h:.3f}mm" '
              f'viewBox="{lo[0]:.6g} {lo[1]:.6g} {w:.6g} {h:.6g}">',
              f'  <rect x="{lo[0]:.6g}" y="{lo[1]:.6g}" width="{w:.6g}" height="{h:.6g}" fill="white"/>']
-    for x, y in xy:
-        lines.append(f'  <circle cx="{x:.6f}" cy="{y:.6f}" r="{radius:g}" fill="black"/>')
+    for (x, y), ri in zip(xy, r):
+        lines.append(f'  <circle cx="{x:.6f}" cy="{y:.6f}" r="{ri:g}" fill="black"/>')
     lines.append("</svg>")
     return "\n".join(lines) + "\n"

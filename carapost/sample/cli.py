@@ -34,6 +34,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds-frame", type=int, default=0, metavar="N",
                    help="frame the seeds.json clicks are made on; negative counts from the end, -1 the last "
                         "frame (default 0)")
+    p.add_argument("--linear-dots", action="store_true",
+                   help="draw each dot centred on the projection of its centre, as carapost did before session 24 "
+                        "(default: as through a real lens, its image a few hundredths of a pixel off that)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     g = p.add_argument_group("a second take of the same face (for Initialize from ROM)")
     g.add_argument("--motion-seed", type=int, default=None,
@@ -67,7 +70,7 @@ def run(args) -> int:
     info = write_sample(args.out_dir, markers=args.markers, frames=args.frames, seed=args.seed, white=args.white,
                         width=w, height=h, take=args.take, workers=args.workers, progress=progress,
                         motion_seed=args.motion_seed, rig_move=rig_move, camera_move=camera_move,
-                        seeds_frame=args.seeds_frame)
+                        seeds_frame=args.seeds_frame, perspective_dots=not args.linear_dots)
     if not args.quiet and sys.stderr.isatty():
         print(file=sys.stderr)
     print(f"sample take: {info['frames']} frames, {info['markers']} face markers, {info['brim_markers']} brim "

@@ -4,8 +4,13 @@ The surfaces (skin, lip band, eyelids, brim plate) are rasterised with a depth
 buffer at a third of the resolution for the default 1280 px images (they are
 smooth; their texture is still sampled per full-resolution pixel, and the
 staircases along their outlines are softened); the painted dots
-are added at full resolution with exact area coverage (:mod:`.coverage`), so
-each dot's centre is the projection of its 3D centre.  Lighting is the
+are added at full resolution with exact area coverage (:mod:`.coverage`), each
+the ellipse of its disc's projected outline (same centroid and second moments):
+as through a real lens, a dot's image is centred a little off the projection of
+its centre, towards its nearer side (:mod:`carapost.core.disc_image`).  Without
+the scene's ``perspective_dots`` each is the image of its disc under the
+projection's linear map at its centre, centred on the projection (the takes of
+carapost before session 24).  Lighting is the
 helmet's: an LED ring beside each lens, falling off with distance, with a skin
 sheen and glints on the corneas.  Then optical blur, then sensor noise.
 
@@ -25,6 +30,7 @@ import cv2
 import numpy as np
 
 from carapost.core.camera import Camera
+from carapost.core.disc_image import outline_moments
 
 from .coverage import ellipse_coverage
 from .face import EYE_HALF, EYE_U, EYE_V, eye_margins
@@ -45,6 +51,7 @@ _VIS_TOL_MM = 0.8        # a ring point sees its own surface when the visible pa
 _DEPTH_TOL_MM = 0.4      # ... or when nothing is nearer the camera than it by more than this (plus slope)
 _MIN_COS = 0.15          # markers seen more obliquely than ~81 degrees are not counted as visible
 _IRIS_R, _PUPIL_R = 5.8, 2.0
+_OUTLINE = 96            # points on each dot's projected outline (its moments to well under 0.01 px)
 
 
 @dataclass
@@ -55,6 +62,9 @@ class ViewTruth:
     ----------
     uv : ndarray, shape (P, 2)
         Raw-pixel projection of each marker's 3D centre (NaN behind the camera).
+    centre : ndarray, shape (P, 2)
+        Raw-pixel centre of each marker's image (what a blob detector should find): off ``uv`` by the
+        perspective offset, a few hundredths of a pixel.
     visible : ndarray of bool, shape (P,)
         Drawn whole and unoccluded, facing the camera, inside the image.
     drawn : ndarray of bool, shape (P,)
@@ -66,6 +76,7 @@ class ViewTruth:
     """
 
     uv: np.ndarray
+    centre: np.ndarray
     visible: np.ndarray
     drawn: np.ndarray
     cos: np.ndarray
@@ -188,6 +199,17 @@ def _jacobians(cam: Camera, g: FrameGeometry) -> np.ndarray:
     return np.stack(cols, axis=-1) * g.radius[:, None, None]
 
 
+def _dot_images(cam: Camera, g: FrameGeometry):
+    """Each disc's image as an ellipse: centre (P, 2), the linear map of the unit circle onto it (P, 2, 2)
+    and its semi-axes (P, 2), major first; raw pixels, NaN where it does not project."""
+    centre, cov = outline_moments(cam.project, g.points, g.radius, g.axes[:, 0], g.axes[:, 1], n=_OUTLINE,
+                                  second=True)
+    w, v = np.linalg.eigh(np.nan_to_num(cov))
+    # A uniform ellipse's variance is a**2 / 4; a dot seen exactly edge-on keeps a sliver (coverage inverts the map).
+    semi = np.maximum(2.0 * np.sqrt(np.maximum(w, 0.0)), 1e-3)
+    return centre, v * semi[:, None, :], semi[:, ::-1]
+
+
 def _draw_eyes(albedo, surf_r, A, k: int, gaze, origin) -> None:
     """The irises and pupils (they move, so they are not in the texture).
 
@@ -297,9 +319,13 @@ def render_view(scene: Scene, g: FrameGeometry, cam: Camera, c: int, f: int, *, 
     facing = (cosv > 0) & np.all(np.isfinite(uv), axis=1)
     visible = facing & (n_own == 9) & inside & (cosv >= _MIN_COS)
     drawn = facing & (n_own >= 1)
-    J = _jacobians(cam, g)
-    sv = np.linalg.svd(np.nan_to_num(J), compute_uv=False)
-    truth = ViewTruth(uv=uv, visible=visible, drawn=drawn, cos=cosv, axes=sv)
+    if scene.perspective_dots:
+        centre, J, sv = _dot_images(cam, g)
+    else:
+        J = _jacobians(cam, g)
+        sv = np.linalg.svd(np.nan_to_num(J), compute_uv=False)
+        centre = uv
+    truth = ViewTruth(uv=uv, centre=centre, visible=visible, drawn=drawn, cos=cosv, axes=sv)
 
     # ---- full resolution, in a window around the surfaces (the rest is background)
     wy0, wy1, wx0, wx1 = _window(tri_map, k, blur)
@@ -333,7 +359,7 @@ def render_view(scene: Scene, g: FrameGeometry, cam: Camera, c: int, f: int, *, 
     # ---- painted markers, exact coverage, blended into the albedo
     if markers and np.any(drawn):
         idx = np.flatnonzero(drawn)
-        x0, y0, cov = ellipse_coverage(uv[idx], J[idx])
+        x0, y0, cov = ellipse_coverage(centre[idx], J[idx])
         part = np.flatnonzero(n_own[idx] < 9)
         if part.size:
             # Partly covered: keep only pixels that show the marker's own surface near it

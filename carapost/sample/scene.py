@@ -168,6 +168,9 @@ class Scene:
         Albedo of each marker's paint (face markers, then the brim's printed dots).
     motion_seed, rig_move, camera_move :
         The second-take options of :func:`build_scene` (``None``, ``(0, 0)``, ``None``: the seed's own take).
+    perspective_dots : bool
+        Dots drawn as the images of their discs under perspective (:mod:`.render`); False: under the
+        projection's linear map at each centre (the takes of carapost before session 24).
     """
 
     width: int
@@ -190,6 +193,7 @@ class Scene:
     motion_seed: int | None = None
     rig_move: tuple = (0.0, 0.0)
     camera_move: tuple | None = None
+    perspective_dots: bool = True
 
     @property
     def raster_scale(self) -> int:
@@ -212,7 +216,8 @@ _RING = np.concatenate([[[0.0, 0.0]], 1.3 * np.column_stack([np.cos(_PHI), np.si
 
 def build_scene(markers: int = 100, frames: int = 120, seed: int = 0, white: bool = False, width: int = 1280,
                 height: int = 720, rate: float = 60.0, noise: float = 2.0, blur: float = 0.8,
-                motion_seed: int | None = None, rig_move=(0.0, 0.0), camera_move=None) -> Scene:
+                motion_seed: int | None = None, rig_move=(0.0, 0.0), camera_move=None,
+                perspective_dots: bool = True) -> Scene:
     """Draw a sample take.
 
     Parameters
@@ -237,6 +242,10 @@ def build_scene(markers: int = 100, frames: int = 120, seed: int = 0, white: boo
         relative to the face (random directions, exact magnitudes).
     camera_move : (int, float, float), optional
         ``(channel, mm, degrees)``: that camera moved relative to the rest of the rig and the brim.
+    perspective_dots : bool
+        Draw each dot as its disc's image under perspective, centred a few hundredths of a pixel off
+        the projection of its centre as a real lens does (:mod:`.render`).  False draws it as before
+        session 24: the image under the projection's linear map at the centre, centred on it.
 
     Returns
     -------
@@ -278,7 +287,8 @@ def build_scene(markers: int = 100, frames: int = 120, seed: int = 0, white: boo
                  atlas=atlas, mesh=_build_mesh(), calib_dR=dR, calib_dt=dt, paint=paint, marker_basis=mb,
                  motion_seed=motion_seed, rig_move=tuple(float(v) for v in rig_move),
                  camera_move=None if camera_move is None else (int(camera_move[0]), float(camera_move[1]),
-                                                               float(camera_move[2])))
+                                                               float(camera_move[2])),
+                 perspective_dots=bool(perspective_dots))
 
 
 @dataclass

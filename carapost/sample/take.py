@@ -37,7 +37,8 @@ _W: dict = {}
 
 
 def _truth_arrays(frames: int, points: int) -> dict:
-    return {"uv": np.full((frames, points, 2), np.nan), "visible": np.zeros((frames, points), bool),
+    return {"uv": np.full((frames, points, 2), np.nan), "centre": np.full((frames, points, 2), np.nan),
+            "visible": np.zeros((frames, points), bool),
             "drawn": np.zeros((frames, points), bool), "cos": np.zeros((frames, points)),
             "axes": np.zeros((frames, points, 2)), "points": np.zeros((frames, points, 3))}
 
@@ -62,7 +63,7 @@ def render_channel(scene: Scene, c: int, path=None, *, lossless: bool = True, me
     Returns
     -------
     dict
-        The channel's truth: ``uv`` (F, P, 2), ``visible``, ``drawn``, ``cos`` (F, P), ``axes`` (F, P, 2),
+        The channel's truth: ``uv`` (F, P, 2), the image centres ``centre`` (F, P, 2), ``visible``, ``drawn``, ``cos`` (F, P), ``axes`` (F, P, 2),
         and the 3D marker centres ``points`` (F, P, 3) (the same in every channel).
     """
     from .render import leds_of, render_view
@@ -75,7 +76,7 @@ def render_channel(scene: Scene, c: int, path=None, *, lossless: bool = True, me
             g = frame_geometry(scene, f)
             cams = true_cameras(scene, f)
             img, tr = render_view(scene, g, cams[c], c, f, leds=leds_of(cams))
-            out["uv"][f], out["visible"][f], out["drawn"][f] = tr.uv, tr.visible, tr.drawn
+            out["uv"][f], out["centre"][f], out["visible"][f], out["drawn"][f] = tr.uv, tr.centre, tr.visible, tr.drawn
             out["cos"][f], out["axes"][f] = tr.cos, tr.axes
             out["points"][f] = g.points
             if tick is not None:
@@ -178,7 +179,8 @@ def _render_pool(scene: Scene, paths: list[Path], lossless: bool, metadata: list
     done = 0
     params = dict(markers=len(scene.markers), frames=scene.frames, seed=scene.seed, white=scene.white,
                   width=scene.width, height=scene.height, rate=scene.rate, noise=scene.noise, blur=scene.blur,
-                  motion_seed=scene.motion_seed, rig_move=scene.rig_move, camera_move=scene.camera_move)
+                  motion_seed=scene.motion_seed, rig_move=scene.rig_move, camera_move=scene.camera_move,
+                  perspective_dots=scene.perspective_dots)
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
                              initargs=(params, q)) as ex:
         futs = [ex.submit(_worker, c, str(paths[c]), lossless, metadata[c]) for c in range(4)]
@@ -322,7 +324,7 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
                  width: int = 1280, height: int = 720, take: str = "Sample", lossless: bool = True,
                  progress=None, workers: int | None = None, noise: float = 2.0, blur: float = 0.8,
                  motion_seed: int | None = None, rig_move=(0.0, 0.0), camera_move=None,
-                 seeds_frame: int = 0) -> dict:
+                 seeds_frame: int = 0, perspective_dots: bool = True) -> dict:
     """Render a synthetic four-camera take with its ground truth into ``out_dir``.
 
     Parameters
@@ -361,6 +363,9 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
     seeds_frame : int
         The frame ``seeds.json``'s clicks are made on (negative: from the end, -1 the last
         frame), for starting Initialize 3D and tracking elsewhere than on frame 0.
+    perspective_dots : bool
+        Dots drawn under perspective, their images' centres off their centres' projections
+        (:func:`.scene.build_scene`); False (``--linear-dots``) draws them as before session 24.
 
     Returns
     -------
@@ -389,7 +394,7 @@ def write_sample(out_dir, *, markers: int = 100, frames: int = 120, seed: int = 
     try:
         scene = build_scene(markers=markers, frames=frames, seed=seed, white=white, width=width, height=height,
                             noise=noise, blur=blur, motion_seed=motion_seed, rig_move=rig_move,
-                            camera_move=camera_move)
+                            camera_move=camera_move, perspective_dots=perspective_dots)
     except ValueError as e:
         raise CaraError(str(e)) from None
     if workers is None:
@@ -468,7 +473,8 @@ def _write_truth(scene: Scene, truth: dict, points: np.ndarray, out: Path, seeds
     tmp = out / f".truth.{os.getpid()}.npz"
     np.savez_compressed(
         tmp, labels=np.array(labels), brim_labels=np.array(brim_labels), face_xyz=face_xyz, brim_xyz=brim_xyz,
-        uv=truth["uv"], visible=truth["visible"], drawn=truth["drawn"], cos=truth["cos"], axes=truth["axes"],
+        uv=truth["uv"], centre=truth["centre"], visible=truth["visible"], drawn=truth["drawn"], cos=truth["cos"],
+        axes=truth["axes"],
         radius=np.concatenate([scene.markers.radius, np.full(nb, BRIM_RADIUS)]), surface=scene.markers.surface,
         param=scene.markers.p, weights=scene.motion.weights, expressions=np.array(EXPRESSIONS),
         gaze=scene.motion.gaze, head_R=scene.motion.head_R, head_t=scene.motion.head_t,
@@ -524,12 +530,14 @@ def seeds_of_take(folder, frame: int) -> dict:
                         width=size[0], height=size[1],
                         motion_seed=int(t["motion_seed"]) if "motion_seed" in t else None,
                         rig_move=tuple(t["rig_move"]) if "rig_move" in t else (0.0, 0.0),
-                        camera_move=tuple(t["camera_move"]) if "camera_move" in t else None)
+                        camera_move=tuple(t["camera_move"]) if "camera_move" in t else None,
+                        perspective_dots=bool(t["perspective_dots"]) if "perspective_dots" in t else True)
     return choose_seeds(scene, t, frame=_frame_index(frame, frames))
 
 
 def _second_take_keys(scene: Scene) -> dict:
-    """truth.npz entries of a second take's options (none for a take of the seed's own: files stay as they were)."""
+    """truth.npz entries of a second take's options and of perspective dots (none for a default take of the
+    seed's own: files stay as they were)."""
     out = {}
     if scene.motion_seed is not None:
         out["motion_seed"] = scene.motion_seed
@@ -537,6 +545,8 @@ def _second_take_keys(scene: Scene) -> dict:
         out["rig_move"] = np.array(scene.rig_move)
     if scene.camera_move is not None:
         out["camera_move"] = np.array(scene.camera_move)
+    if not scene.perspective_dots:
+        out["perspective_dots"] = np.array(False)
     return out
 
 

@@ -433,12 +433,12 @@ def disc_image(rng, size=41, radius=4.0, blur=1.0, amplitude=100.0, background=6
 
 def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int = 40, markers: int = 100,
                   noise: float | None = None, blur: float | None = None, cameras=(0, 1, 2, 3),
-                  jaw_open: int = 0, take_frames: int = 120) -> list[SynthImage]:
+                  jaw_open: int = 0, take_frames: int = 120, perspective_dots: bool = True) -> list[SynthImage]:
     """Frames of a ``carapost sample`` take (all its cameras), rendered in memory, with their truth.
 
     The same renderer as ``carapost sample`` (:mod:`carapost.sample`): a face with
     painted dots, brows, eyes, lips, hair and the brim with its printed dots, under
-    the helmet's lights.  ``centres`` are the visible markers (face and brim);
+    the helmet's lights.  ``centres`` are the centres of the visible markers' images (face and brim);
     markers drawn but partly covered are ``hidden`` (neither required nor false), and
     so are the ``faint`` ones: in view, but their paint barely changes the image
     (:data:`FAINT`; black dots painted on a dense black eyebrow look like the brow).
@@ -461,6 +461,9 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
         Instead of ``frames`` and ``step``: this many frames of a ``take_frames``-frame take where
         the jaw is open widest (its lower-lip and chin dots seen at grazing angles in the
         jaw's shadow, beside the teeth), each a frame apart from the next.
+    perspective_dots : bool
+        Dots drawn under perspective, as by ``carapost sample``: ``centres`` are their images' centres, a few
+        hundredths of a pixel off their centres' projections (False: ``--linear-dots``, centred on them).
     """
     # Imported here: the renderer is a consumer of the core, not a part of it.
     from carapost.sample.render import leds_of, render_view
@@ -468,7 +471,7 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
 
     kw = {k: float(v) for k, v in (("noise", noise), ("blur", blur)) if v is not None}
     length = int(take_frames) if jaw_open else max(1, (frames - 1) * step + 1)
-    sc = build_scene(markers=markers, frames=length, seed=seed, white=white, **kw)
+    sc = build_scene(markers=markers, frames=length, seed=seed, white=white, perspective_dots=perspective_dots, **kw)
     labels = np.array(list(sc.markers.labels) + [f"Brim_{i}" for i in range(sc.n_brim)])
     out = []
     if jaw_open:
@@ -486,15 +489,18 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
             img, tr = render_view(sc, g, cams[c], c, f, leds=leds_of(cams))
             # The same view without paint (same noise stream): what each dot changes.
             bare, _ = render_view(sc, g, cams[c], c, f, leds=leds_of(cams), markers=False)
-            brim = np.zeros(len(tr.uv), bool)
-            brim[len(tr.uv) - sc.n_brim:] = True
+            # A detector's target is the centre of each dot's image (a few hundredths of a pixel off the
+            # projection of its centre; the brim's solves take that offset off).
+            at = tr.centre
+            brim = np.zeros(len(at), bool)
+            brim[len(at) - sc.n_brim:] = True
             vis = np.flatnonzero(tr.visible)
-            paint = paint_contrast(img, bare, tr.uv[vis], tr.axes[vis], white)
+            paint = paint_contrast(img, bare, at[vis], tr.axes[vis], white)
             # Thin dots (edge-on) are left required: blur spreads their paint, so their mean change is low.
             faint = (paint < FAINT * np.median(paint)) & (tr.axes[vis, 1] >= 1.5) if len(vis) else np.zeros(0, bool)
             keep = vis[~faint]
-            hidden = np.concatenate([tr.uv[tr.drawn & ~tr.visible], tr.uv[vis[faint]]])
-            s = SynthImage(img, tr.uv[keep], tr.axes[keep], hidden, brim[keep], tr.uv[vis[faint]],
+            hidden = np.concatenate([at[tr.drawn & ~tr.visible], at[vis[faint]]])
+            s = SynthImage(img, at[keep], tr.axes[keep], hidden, brim[keep], at[vis[faint]],
                            labels[keep].tolist(), labels[vis[faint]].tolist())
             out.append(s)
     return out

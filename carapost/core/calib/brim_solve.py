@@ -23,6 +23,7 @@ from ..commands import Command, CompoundCommand
 from ..edits import AddPoints, SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, SRC_DETECTION, SRC_NONE, ST_RECONSTRUCTED, ST_SINGLE
+from ..disc_image import disc_image_offsets
 from .nearest import nearest_with_clearance
 
 #: RMS (px) above which the attached detections do not fit the brim.
@@ -48,7 +49,7 @@ class BrimSolution:
     uv : ndarray (M, S, 2)
         Raw pixels of the matches (NaN none).
     err : ndarray (M, S)
-        Reprojection errors (px) of the matches.
+        Reprojection errors (px) of the matches (less their dots' perspective offsets).
     rms_rigid : float
         RMS error (px) of the rigid solve from the given correspondences.
     rms : float
@@ -184,7 +185,15 @@ def match_markers(cameras, markers, det_xy, used, known_det, gate=MATCH_GATE_PX,
     return det
 
 
-def solve_brim(cameras, markers, seed_uv, det_xy, used, seed_det) -> BrimSolution:
+def _centred(cameras, markers, radius, uv):
+    """``uv`` less each brim dot's perspective offset under ``cameras``: where the dots' centres project."""
+    if radius is None or not np.any(np.asarray(radius) > 0):
+        return uv
+    off = np.stack([disc_image_offsets(c.project, markers, radius) for c in cameras], axis=1)
+    return uv - off
+
+
+def solve_brim(cameras, markers, seed_uv, det_xy, used, seed_det, radius=None) -> BrimSolution:
     """The three steps of Solve Calibration Brim on arrays.
 
     Parameters
@@ -197,6 +206,10 @@ def solve_brim(cameras, markers, seed_uv, det_xy, used, seed_det) -> BrimSolutio
     det_xy, used : per camera detections and their used mask (see :func:`match_markers`).
     seed_det : ndarray (M, S) int
         Detection indices of the attached observations (-1 none, or not a detection).
+    radius : ndarray (M,), optional
+        The dots' radii (mm, :attr:`.Brim.radius`).  Where known, each detection has its dot's
+        perspective offset (:func:`~carapost.core.disc_image.disc_image_offsets`), from the cameras of the
+        previous step, taken off before each solve after the first.
 
     Raises
     ------
@@ -219,18 +232,19 @@ def solve_brim(cameras, markers, seed_uv, det_xy, used, seed_det) -> BrimSolutio
     for s in range(S):
         m = (det[:, s] >= 0) & ~obs[:, s]
         uv[m, s] = det_xy[s][det[m, s]]
-    cams, _ = solve_rig(cams, markers, uv)
+    cams, _ = solve_rig(cams, markers, _centred(cams, markers, radius, uv))
     # Second pass: the better rig may reach markers the seeds' solve could not.
     det = match_markers(cams, markers, det_xy, used, det)
     for s in range(S):
         m = (det[:, s] >= 0) & ~np.all(np.isfinite(uv[:, s]), axis=-1)
         uv[m, s] = det_xy[s][det[m, s]]
-    cams, _ = solve_rig(cams, markers, uv)
+    cams, _ = solve_rig(cams, markers, _centred(cams, markers, radius, uv))
+    uv_o = _centred(cams, markers, radius, uv)
     out = []
     for s, cam in enumerate(cams):
         m = np.all(np.isfinite(uv[:, s]), axis=-1)
-        out.append(refine_camera(cam, markers[m], uv[m, s]) if np.count_nonzero(m) >= MIN_PER_CAMERA else cam)
-    err = np.stack([np.linalg.norm(c.project(markers) - uv[:, s], axis=-1) for s, c in enumerate(out)], axis=1)
+        out.append(refine_camera(cam, markers[m], uv_o[m, s]) if np.count_nonzero(m) >= MIN_PER_CAMERA else cam)
+    err = np.stack([np.linalg.norm(c.project(markers) - uv_o[:, s], axis=-1) for s, c in enumerate(out)], axis=1)
     rms = float(np.sqrt(np.nanmean(err ** 2)))
     return BrimSolution(out, det, uv, err, rms_rigid, rms)
 
@@ -354,7 +368,8 @@ def solve_calibration_brim(project, frame: int) -> Command:
     """
     frame = project.clamp_frame(frame)
     bp, seed_uv, seed_det, det_xy, used = _frame_inputs(project, frame)
-    sol = solve_brim(project.rig.cameras, project.brim.markers, seed_uv, det_xy, used, seed_det)
+    sol = solve_brim(project.rig.cameras, project.brim.markers, seed_uv, det_xy, used, seed_det,
+                     project.brim.radius)
     return _solution_command(project, frame, sol, bp, "Solve Calibration Brim [Manual]", calibration=True)
 
 
@@ -366,5 +381,6 @@ def solve_frame_cameras(project, frame: int) -> Command:
     """
     frame = project.clamp_frame(frame)
     bp, seed_uv, seed_det, det_xy, used = _frame_inputs(project, frame)
-    sol = solve_brim(project.rig.cameras_at(frame), project.brim.markers, seed_uv, det_xy, used, seed_det)
+    sol = solve_brim(project.rig.cameras_at(frame), project.brim.markers, seed_uv, det_xy, used, seed_det,
+                     project.brim.radius)
     return _solution_command(project, frame, sol, bp, "Solve Frame Cameras", calibration=False)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..brim import brim_image_offsets
 from ..camera import matrix_to_quaternion
 from ..commands import CompoundCommand
 from ..edits import SetCameraPoses, SetPointData
@@ -276,11 +277,12 @@ class FrameData:
 
 
 def gather_frame(project, frame: int, cameras=None) -> FrameData:
-    """Collect the points of ``frame`` with 2D data (brim points at their markers)."""
+    """Collect the points of ``frame`` with 2D data (brim points at their markers, their detections less
+    their dots' perspective offsets under ``cameras``, by default the frame's)."""
     from ..camera import triangulate_many
 
     S = project.sensor_count
-    ids, Xs, fixed, uvs = [], [], [], []
+    ids, Xs, fixed, uvs, dots = [], [], [], [], []
     brim = project.brim
     for p in project.points.values():
         src = p.src[frame]
@@ -293,12 +295,18 @@ def gather_frame(project, frame: int, cameras=None) -> FrameData:
         fixed.append(is_brim)
         Xs.append(brim.markers[p.brim_index] if is_brim else p.pos[frame].astype(float))
         uvs.append(uv)
+        if is_brim:
+            dots.append(p.brim_index)
     X = np.array(Xs, float).reshape(-1, 3)
     uv = np.array(uvs, float).reshape(-1, S, 2)
     fixed = np.array(fixed, bool)
+    cams = cameras if cameras is not None else project.rig.cameras_at(frame)
+    if dots:
+        # The brim's dots are held at their centres: their detections, at their images' centres, less the
+        # perspective offset between the two.
+        uv[fixed] -= brim_image_offsets(cams, brim, dots)
     need = ~fixed & ~np.all(np.isfinite(X), axis=1)
     if np.any(need):
-        cams = cameras if cameras is not None else project.rig.cameras_at(frame)
         X[need] = triangulate_many(cams, uv[need])
     keep = np.all(np.isfinite(X), axis=1)
     return FrameData([i for i, k in zip(ids, keep) if k], X[keep], fixed[keep], uv[keep])
@@ -408,6 +416,8 @@ def bundle_sequence(project, start: int | None = None, end: int | None = None, p
     brim = project.brim
     is_brim = np.array([p.kind == BRIM and brim is not None and 0 <= p.brim_index < len(brim) for p in pts], bool)
     markers = np.array([brim.markers[p.brim_index] if b else np.zeros(3) for p, b in zip(pts, is_brim)]).reshape(-1, 3)
+    brim_idx = np.array([p.brim_index for p, b in zip(pts, is_brim) if b], int)
+    brim_r = brim.radius[brim_idx] if brim is not None else np.zeros(0)
     n = end - start + 1
     quat = project.rig.quat[:, start:end + 1].copy()
     cpos = project.rig.position[:, start:end + 1].copy()
@@ -437,6 +447,10 @@ def bundle_sequence(project, start: int | None = None, end: int | None = None, p
                 else:
                     R[i, s] = quaternion_to_matrix(project.rig.quat[s, sf])
                     C[i, s] = project.rig.position[s, sf]
+        if np.any(brim_r > 0):
+            for i in range(b1 - b0):
+                uv[i, is_brim] -= brim_image_offsets([base[s].with_pose(R[i, s], C[i, s]) for s in range(S)],
+                                                     brim, brim_idx)
         nobs = np.count_nonzero(np.all(np.isfinite(uv), axis=-1), axis=2)
         usable = (nobs >= 2) | (is_brim[None] & (nobs >= 1))
         # Points without a position but with 2+ views start from a triangulation.

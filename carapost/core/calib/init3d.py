@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..brim import brim_image_offsets
 from ..camera import matrix_to_quaternion, symmetric_epipolar_distance, triangulate_many
 from ..commands import CompoundCommand
 from ..edits import AddPoints, SetCameraPoses, SetPointData
@@ -249,6 +250,8 @@ def initialize_3d(project, frame: int, params: dict | None = None):
     bX = np.array([project.brim.markers[q.brim_index] for q in brim]).reshape(-1, 3)
     buv = np.array([np.where((q.src[frame] != SRC_NONE)[:, None], q.uv[frame].astype(float), np.nan)
                     for q in brim]).reshape(-1, S, 2)
+    # Held at their markers: less their dots' perspective offsets (docs/brims.md).
+    buv -= brim_image_offsets(cams, project.brim, [q.brim_index for q in brim])
     for rnd in range(2):
         X = np.array([d["X"] for d in pts])
         uv = np.array([d["uv"] for d in pts])

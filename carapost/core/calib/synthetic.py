@@ -16,6 +16,7 @@ from scipy.spatial.transform import Rotation
 from ..brim import Brim
 from ..camera import Camera
 from ..detections import make_detections
+from ..disc_image import disc_image_offsets
 from ..project import Project
 from ..rig import CameraRig
 
@@ -132,12 +133,17 @@ class Scene:
 
 
 def make_scene(markers: int = 35, frames: int = 1, seed: int = 0, noise: float = 0.05, false_dets: int = 6,
-               width: int = 1280, height: int = 720) -> Scene:
-    """Build a :class:`Scene` (see the module docstring)."""
+               width: int = 1280, height: int = 720, brim_radius: float = 0.0) -> Scene:
+    """Build a :class:`Scene` (see the module docstring).
+
+    With ``brim_radius`` (mm) the brim's dots are discs of that radius: their detections are the centres
+    of their images, off their centres' projections by the perspective offset
+    (:func:`~carapost.core.disc_image.disc_image_offsets`), and the brim knows the radius.
+    """
     rng = np.random.default_rng(seed)
     scale = width / 1280.0
     brim_w = np.column_stack([BRIM_MARKERS, np.zeros(len(BRIM_MARKERS))])
-    brim = Brim("synthetic", brim_w)
+    brim = Brim("synthetic", brim_w, radius=brim_radius)
     to_world = lambda Xr: (Xr - BRIM_RIG_T) @ BRIM_RIG_R   # rig -> world (brim frame)
     intr, rig_pose = [], []
     for i, (c, t) in enumerate(_NOMINAL):
@@ -196,7 +202,7 @@ def make_scene(markers: int = 35, frames: int = 1, seed: int = 0, noise: float =
             facing = np.sum(view * n_w, axis=1) > 0.25
             inimg = np.all(np.isfinite(uvf), axis=1) & (uvf[:, 0] > 4) & (uvf[:, 0] < width - 4) & (uvf[:, 1] > 4) & (uvf[:, 1] < height - 4)
             vf = facing & inimg
-            uvb = cam.project(brim_w)
+            uvb = cam.project(brim_w) + disc_image_offsets(cam.project, brim_w, brim_radius)
             vb = np.all(np.isfinite(uvb), axis=1) & (uvb[:, 0] > 4) & (uvb[:, 0] < width - 4) & (uvb[:, 1] > 4) & (uvb[:, 1] < height - 4)
             pts = np.concatenate([uvf[vf], uvb[vb], rng.uniform([0, 0], [width, height], (false_dets, 2))])
             pts[: vf.sum() + vb.sum()] += rng.normal(0, noise, (vf.sum() + vb.sum(), 2))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..disc_image import disc_image_offsets
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from . import elastic, patch, reacquire, vote
 from .nearest import SortedSweep
@@ -341,7 +342,7 @@ class FrameTracker:
     """
 
     def __init__(self, rig: RigState, X0, uv0, size0, brim, params: TrackingParams, images=None, pool=None,
-                 start_frame: int | None = None):
+                 start_frame: int | None = None, brim_radius=None):
         self.rig = rig
         self.p = params
         self.images = images
@@ -353,6 +354,9 @@ class FrameTracker:
         self.uv_prev = np.array(uv0, float)              # raw px of the previous frame's samples
         self.size = np.array(size0, float)
         self.brim = np.asarray(brim, float).reshape(-1, 3)
+        # The brim dots' radii (mm): their images' perspective offsets come off the detections (:meth:`_solve_brim`).
+        r = np.zeros(len(self.brim)) if brim_radius is None else np.asarray(brim_radius, float).ravel()
+        self.brim_radius = r if np.any(r > 0) else None
         self.prev_frame = None
         self.nb = elastic.neighbours(self.X, mutual=elastic.MUTUAL)
         self.off = np.full(self.nb.shape + (3,), np.nan)
@@ -411,6 +415,10 @@ class FrameTracker:
         det[rows[j], sens[j]] = fd.local[g]
         r, s, g = fd.attached(det)
         uv_c[r, s] = fd.xy_all[g]
+        if self.brim_radius is not None and len(r):
+            # A dot's image is centred off its centre's projection (perspective); the offset under the previous
+            # frame's cameras is the offset under this frame's to well within the detections' noise.
+            uv_c[r, s] -= disc_image_offsets(self.rig.project, self.brim, self.brim_radius)[r, s]
         valid = det >= 0
         rig = refine_poses(self.rig, self.brim, uv_c, valid, iterations=BRIM_ITERATIONS)
         err = reprojection(rig, self.brim, uv_c, valid)

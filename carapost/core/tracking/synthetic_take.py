@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from ..calib.synthetic import BRIM_RIG_R, BRIM_RIG_T, Scene, face_surface, make_scene
 from ..detections import make_detections
+from ..disc_image import disc_image_offsets
 from ..project import Project
 from ..rig import CameraRig
 
@@ -48,7 +49,7 @@ def _pulses(rng, frames, count, attack, hold):
 def make_take(markers: int = 35, frames: int = 300, seed: int = 0, noise: float = 0.05, false_dets: int = 6,
               jaw_mm: float = 14.0, jaw_frames: int = 5, blinks: int = 4, occlusion_rate: float = 0.01,
               hidden_markers: int = 3, slips: int = 2, head_mm: float = 2.0, rig_move: tuple = (0.0, 0.0),
-              motion_seed: int | None = None) -> Scene:
+              motion_seed: int | None = None, brim_radius: float = 0.0) -> Scene:
     """Build a moving :class:`Scene` (``scene.extras`` holds ``sizes`` and the event tracks).
 
     Parameters
@@ -74,8 +75,10 @@ def make_take(markers: int = 35, frames: int = 300, seed: int = 0, noise: float 
     motion_seed
         Seed of the motion, events and detection noise (default from ``seed``); the face and rig
         layout always come from ``seed``.
+    brim_radius
+        As :func:`make_scene`: brim dots of this radius (mm), detected at their images' centres.
     """
-    base = make_scene(markers, frames=1, seed=seed, noise=noise, false_dets=false_dets)
+    base = make_scene(markers, frames=1, seed=seed, noise=noise, false_dets=false_dets, brim_radius=brim_radius)
     rng = np.random.default_rng(seed + 1000 if motion_seed is None else motion_seed)
     S = 4
     cams0 = base.cameras[0]
@@ -164,7 +167,7 @@ def make_take(markers: int = 35, frames: int = 300, seed: int = 0, noise: float 
             inimg = (np.all(np.isfinite(uvf), axis=1) & (uvf[:, 0] > 4) & (uvf[:, 0] < width - 4)
                      & (uvf[:, 1] > 4) & (uvf[:, 1] < height - 4))
             vf = facing & inimg & ~hidden[f, s]
-            uvb = cam.project(brim.markers)
+            uvb = cam.project(brim.markers) + disc_image_offsets(cam.project, brim.markers, brim.radius)
             vb = (np.all(np.isfinite(uvb), axis=1) & (uvb[:, 0] > 4) & (uvb[:, 0] < width - 4)
                   & (uvb[:, 1] > 4) & (uvb[:, 1] < height - 4))
             nfd = false_dets
