@@ -58,6 +58,8 @@ NARROW_DEPTH_MM = 1.0
 #: ...unless it lies more than this many times Max Allowed 3D Point Error from it: then one blob is
 #: another dot (a bias is a few mm), and the point is left to Remove Bad 3D Points.
 NARROW_MISMATCH = 2.0
+#: How much (mm) the bound on a held point's depth widens for each consecutive frame it has been held.
+HELD_GROWTH_MM = 0.25
 #: The only wide view of a close pair is dropped by the held-out test, below Max Allowed 2D Projection
 #: Error, only where that brings the point this much (mm) nearer the neighbours' prediction.
 WIDE_VIEW_MM = 0.5
@@ -366,6 +368,7 @@ class FrameTracker:
         elastic.update_offsets(self.off, self.nb, self.X, meas)
         self.X_last = self.X.copy()
         self.unseen = np.where(meas, 0, LAST_SEEN_FRAMES)  # frames since each point last had a position
+        self.held = np.zeros(self.N, np.int64)           # consecutive frames each point's depth was held
         self.patch_run = np.zeros(self.N, int)           # frames in a row without a blob in any view
         # Points back from a loss on two views on the last frame: kept only if this frame finds them too.
         self.tentative = np.zeros(self.N, bool)
@@ -684,6 +687,7 @@ class FrameTracker:
         self.X = X.copy()
         self.X_last[have] = X[have]
         self.unseen = np.where(have, 0, self.unseen + 1)
+        self.held = np.where(clamped, self.held + 1, np.where(status == ST_RECONSTRUCTED, 0, self.held))
         # A clamped depth is the prediction's, not a measurement: refreshing the offsets with it would
         # let a biased pair walk the point away by the clamp distance every frame.
         elastic.update_offsets(self.off, self.nb, X, (status == ST_RECONSTRUCTED) & ~clamped & ~tentative,
@@ -1113,7 +1117,8 @@ class FrameTracker:
             return X, pred, clamped
         along = np.einsum("ni,ni->n", X[rows] - pred[rows], u[rows])
         measured_along = np.einsum("ni,ni->n", Xm[rows] - pred[rows], u[rows])
-        bound = np.maximum(NARROW_DEPTH_MM, spread[rows])
+        # A point held frame after frame is held to offsets that age with it: the face deforms under them.
+        bound = np.maximum(NARROW_DEPTH_MM + HELD_GROWTH_MM * self.held[rows], spread[rows])
         excess = along - np.clip(along, -bound, bound)
         # Held: the measured depth itself beyond the bound.  Its offsets are not refreshed even where the
         # average with the prediction came within the bound: a pair biased frame after frame would
