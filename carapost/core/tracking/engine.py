@@ -58,6 +58,10 @@ NARROW_DEPTH_MM = 1.0
 #: ...unless it lies more than this many times Max Allowed 3D Point Error from it: then one blob is
 #: another dot (a bias is a few mm), and the point is left to Remove Bad 3D Points.
 NARROW_MISMATCH = 2.0
+#: The brim dots' perspective offsets are computed again once a camera has moved this far (mm) or turned this
+#: much (radians) since they were (:meth:`FrameTracker._brim_offsets`): they change ~1 % a mm or a degree.
+BRIM_OFFSET_MM = 0.5
+BRIM_OFFSET_RAD = 0.005
 #: How much (mm) the bound on a held point's depth widens for each consecutive frame it has been held.
 HELD_GROWTH_MM = 0.25
 #: The only wide view of a close pair is dropped by the held-out test, below Max Allowed 2D Projection
@@ -359,6 +363,7 @@ class FrameTracker:
         # The brim dots' radii (mm): their images' perspective offsets come off the detections (:meth:`_solve_brim`).
         r = np.zeros(len(self.brim)) if brim_radius is None else np.asarray(brim_radius, float).ravel()
         self.brim_radius = r if np.any(r > 0) else None
+        self._boff = None                                # (R, C, offsets) of :meth:`_brim_offsets`
         self.prev_frame = None
         self.nb = elastic.neighbours(self.X, mutual=elastic.MUTUAL)
         self.off = np.full(self.nb.shape + (3,), np.nan)
@@ -419,9 +424,7 @@ class FrameTracker:
         r, s, g = fd.attached(det)
         uv_c[r, s] = fd.xy_all[g]
         if self.brim_radius is not None and len(r):
-            # A dot's image is centred off its centre's projection (perspective); the offset under the previous
-            # frame's cameras is the offset under this frame's to well within the detections' noise.
-            uv_c[r, s] -= disc_image_offsets(self.rig.project, self.brim, self.brim_radius)[r, s]
+            uv_c[r, s] -= self._brim_offsets()[r, s]
         valid = det >= 0
         rig = refine_poses(self.rig, self.brim, uv_c, valid, iterations=BRIM_ITERATIONS)
         err = reprojection(rig, self.brim, uv_c, valid)
@@ -434,6 +437,24 @@ class FrameTracker:
             err = reprojection(rig, self.brim, uv_c, valid)
         fd.free[fd.attached(det, valid)[2]] = False
         return rig, det, uv_c, err
+
+    def _brim_offsets(self) -> np.ndarray:
+        """The brim dots' perspective offsets (B, S, 2) under the previous frame's cameras.
+
+        A dot's image is centred off its centre's projection; the offset under the previous frame's
+        cameras is this frame's to well within the detections' noise, and it changes by about 1 % for a
+        millimetre or a degree of camera motion: computed again (0.9 ms) only once a camera has moved
+        :data:`BRIM_OFFSET_MM` or :data:`BRIM_OFFSET_RAD` since.
+        """
+        rig = self.rig
+        if self._boff is not None:
+            R0, C0, off = self._boff
+            turned = np.arccos(np.clip((np.einsum("sij,sij->s", R0, rig.R) - 1.0) / 2.0, -1.0, 1.0))
+            if np.all(np.linalg.norm(rig.C - C0, axis=1) <= BRIM_OFFSET_MM) and np.all(turned <= BRIM_OFFSET_RAD):
+                return off
+        off = disc_image_offsets(rig.project, self.brim, self.brim_radius)
+        self._boff = (rig.R.copy(), rig.C.copy(), off)
+        return off
 
     def _search(self, fd, rig, Xpred, radius, slots, taken, k=3, nudge=None, uv=None, found=None):
         """Candidates of ``slots`` (N, S) bool: pair arrays (point, sensor, local det, distance), nearest first.
