@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .disc_image import disc_image_offsets
+from .disc_image import camera_offsets
 
 
 @dataclass(eq=False)
@@ -67,11 +67,7 @@ def brim_image_offsets(cameras, brim: "Brim", idx=None) -> np.ndarray:
         To be taken off each detection of a brim dot before a solve that holds it at its marker.
     """
     idx = np.arange(len(brim)) if idx is None else np.asarray(idx, int)
-    out = np.zeros((len(idx), len(cameras), 2))
-    if idx.size and np.any(brim.radius[idx] > 0):
-        for s, cam in enumerate(cameras):
-            out[:, s] = disc_image_offsets(cam.project, brim.markers[idx], brim.radius[idx])
-    return out
+    return camera_offsets(cameras, brim.markers[idx], brim.radius[idx])
 
 
 DEFAULT_BRIMS = ("v2.0", "v1.1", "v1.0")

@@ -96,12 +96,19 @@ def disc_image_offsets(project, centres, radius, normal=(0.0, 0.0, 1.0), n: int 
     centres = np.asarray(centres, float).reshape(-1, 3)
     M = len(centres)
     r = np.broadcast_to(np.asarray(radius, float), (M,))
-    probe = project(centres[:1] if M else np.zeros((1, 3)))
-    out = np.zeros((M,) + probe.shape[1:])
     rows = np.flatnonzero(r > 0)
-    if rows.size == 0:
-        return out
     e0, e1 = plane_axes(normal)
     off = outline_moments(project, centres[rows], r[rows], e0, e1, n) - project(centres[rows])
+    out = np.zeros((M,) + off.shape[1:])
     out[rows] = np.nan_to_num(off, nan=0.0, posinf=0.0, neginf=0.0)
+    return out
+
+
+def camera_offsets(cameras, centres, radius) -> np.ndarray:
+    """:func:`disc_image_offsets` of dots in the z = 0 plane in raw pixels of each camera: ``(M, S, 2)``."""
+    centres = np.asarray(centres, float).reshape(-1, 3)
+    out = np.zeros((len(centres), len(cameras), 2))
+    if np.any(np.asarray(radius) > 0):
+        for s, cam in enumerate(cameras):
+            out[:, s] = disc_image_offsets(cam.project, centres, radius)
     return out

@@ -23,7 +23,7 @@ from ..commands import Command, CompoundCommand
 from ..edits import AddPoints, SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, SRC_DETECTION, SRC_NONE, ST_RECONSTRUCTED, ST_SINGLE
-from ..disc_image import disc_image_offsets
+from ..disc_image import camera_offsets
 from .nearest import nearest_with_clearance
 
 #: RMS (px) above which the attached detections do not fit the brim.
@@ -189,8 +189,7 @@ def _centred(cameras, markers, radius, uv):
     """``uv`` less each brim dot's perspective offset under ``cameras``: where the dots' centres project."""
     if radius is None or not np.any(np.asarray(radius) > 0):
         return uv
-    off = np.stack([disc_image_offsets(c.project, markers, radius) for c in cameras], axis=1)
-    return uv - off
+    return uv - camera_offsets(cameras, markers, radius)
 
 
 def solve_brim(cameras, markers, seed_uv, det_xy, used, seed_det, radius=None) -> BrimSolution:
