@@ -133,7 +133,7 @@ def weights(motion: np.ndarray) -> np.ndarray:
 
 def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarray,
             min_neighbours: int = MIN_NEIGHBOURS, weight: np.ndarray | None = None,
-            rigid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+            rigid: np.ndarray | None = None, rotate: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Median over available neighbours of (neighbour position + offset).
 
     Parameters
@@ -151,6 +151,9 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
     rigid : ndarray (n,) bool, optional
         Rows predicted by their neighbours' rigid motion instead (:func:`_rigid_fit`; rows with fewer
         than four usable neighbours keep the median): points whose offsets are from frames ago.
+    rotate : ndarray (n,) bool, optional
+        Rows whose votes are turned first by their neighbourhood's rotation since the offsets were refreshed
+        (:func:`turned_offsets`); the median then still leaves out a neighbour that moved on its own.
 
     Returns
     -------
@@ -164,6 +167,8 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
         pred, count = predict(X, available, nb, off, min_neighbours, weight)
         _rigid_fit(X, available, nb, off, weight, np.flatnonzero(rigid), pred)
         return pred, count
+    if rotate is not None and np.any(rotate):
+        off = turned_offsets(X, available, nb, off, weight, np.flatnonzero(rotate))
     if weight is None:
         pred, _use, _cand, count = _votes_median(X, available, nb, off, min_neighbours)
         return pred, count
@@ -273,23 +278,45 @@ def _votes_weighted_median(X, available, nb, off, min_neighbours, weight, ratio)
     return pred, count
 
 
-def _rigid_fit(X, available, nb, off, weight, rows, pred) -> None:
-    """Into ``pred[rows]``, for rows with 4+ usable neighbours: where the neighbours' rigid motion takes the point.
-
-    The offsets place each neighbour relative to the point as it was when they were last refreshed
-    (``-off``, the point at the origin); the rotation and shift that best carry those places onto the
-    neighbours' positions now (weighted least squares, :func:`..stabilize.kabsch`) carry the point too, to
-    the shift.  A point lost for a while keeps the offsets of its loss: a median of translated votes leaves
-    it behind a turning jaw.
-    """
+def _neighbourhood_motion(X, available, nb, off, weight, rows):
+    """The rigid motion (n, 3, 4) carrying each of ``rows``' neighbours from where its offsets placed them
+    (``-off``, the point at the origin) to where they are now (weighted least squares,
+    :func:`..stabilize.kabsch`), and which rows have the four usable neighbours that it needs (n,) bool."""
     j = nb[rows]
     there = np.where((j >= 0)[..., None], X[np.maximum(j, 0)], np.nan)
     then = -off[rows]
     usable = (j >= 0) & available[np.maximum(j, 0)] & np.isfinite(there).all(-1) & np.isfinite(then).all(-1)
     w = np.ones(j.shape) if weight is None else weight[rows]
     fit = kabsch(then, there, np.where(usable, w, 0.0))
-    enough = usable.sum(axis=1) >= 4
+    return fit, usable.sum(axis=1) >= 4
+
+
+def _rigid_fit(X, available, nb, off, weight, rows, pred) -> None:
+    """Into ``pred[rows]``, for rows with 4+ usable neighbours: where the neighbours' rigid motion takes the point.
+
+    The rotation and shift that best carry the neighbours from where the offsets placed them (when they were
+    last refreshed) onto their positions now (:func:`_neighbourhood_motion`) carry the point too, to the
+    shift.  A point lost for a while keeps the offsets of its loss: a median of translated votes leaves it
+    behind a turning jaw.
+    """
+    fit, enough = _neighbourhood_motion(X, available, nb, off, weight, rows)
     pred[rows[enough]] = fit[enough, :, 3]
+
+
+def turned_offsets(X, available, nb, off, weight, rows) -> np.ndarray:
+    """``off`` (n, K, 3) with each of ``rows`` turned by its neighbourhood's rotation since it was refreshed.
+
+    A vote ``X[j] + off`` translates the point with its neighbour; where the face turns (the jaw opening)
+    the point also swings about it, by the offset's length times the angle: 0.1-0.2 mm a frame at 10 mm.
+    The rotation is :func:`_neighbourhood_motion`'s; rows with fewer than four usable neighbours are left
+    as they are.
+    """
+    fit, enough = _neighbourhood_motion(X, available, nb, off, weight, rows)
+    enough &= np.isfinite(fit[:, 0, 0])
+    out = np.array(off, dtype=float, copy=True)
+    r = rows[enough]
+    out[r] = np.einsum("nij,nkj->nki", fit[enough, :, :3], off[r])
+    return out
 
 
 @njit(**JIT_EXACT)

@@ -289,6 +289,9 @@ FUSE_GATE = 3.0
 #: alone, nor more than the neighbours' spread allows): the average becomes a filter over frames
 #: (docs/tracking.md, "Session 22: the prediction's certainty carried from frame to frame").  0: off.
 CARRIED_Q = 0.6
+#: The neighbours' votes that a frame's measured points are averaged with are turned by their neighbourhood's
+#: rotation since their offsets were refreshed (:func:`.elastic.turned_offsets`; docs/tracking.md, "Session 25").
+TURNED_VOTES = True
 
 
 def fuse_depth(X: np.ndarray, info: np.ndarray, pred: np.ndarray, pred_sd, rows: np.ndarray,
@@ -1098,7 +1101,8 @@ class FrameTracker:
         """
         u, mm = depth_uncertainty(rig, X, valid & measured[:, None])
         narrow = measured & (mm > NARROW_MM_PER_PX)
-        pred, _ = elastic.predict(X, measured, self.nb, self.off, weight=self.w)
+        turn = np.ones(len(X), bool) if TURNED_VOTES else None
+        pred, _ = elastic.predict(X, measured, self.nb, self.off, weight=self.w, rotate=turn)
         clamped = np.zeros(len(X), bool)
         has_firm = np.zeros(len(X), bool)
         firm = measured
@@ -1109,7 +1113,7 @@ class FrameTracker:
             # neighbour with a heavy weight would otherwise drag every narrow point near it.
             dev = np.linalg.norm(X - pred, axis=1)
             firm = measured & ~narrow & ~(dev > float(self.p.max_allowed_3d_point_error))
-            firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w)
+            firm_pred, _ = elastic.predict(X, firm, self.nb, self.off, weight=self.w, rotate=turn)
             has_firm = finite_rows(firm_pred)
             # A narrow point whose depth its firm neighbours put millimetres away (to be held near them below)
             # does not vote for the points without firm neighbours: a close pair 5.5 mm deep pulled a chin dot
@@ -1118,7 +1122,7 @@ class FrameTracker:
             off_depth = narrow & has_firm & (along > OFF_DEPTH_VOTE_MM)
             if np.any(off_depth):
                 voting = measured & ~off_depth
-                pred, _ = elastic.predict(X, voting, self.nb, self.off, weight=self.w)
+                pred, _ = elastic.predict(X, voting, self.nb, self.off, weight=self.w, rotate=turn)
             pred[has_firm] = firm_pred[has_firm]
         # How far each prediction can be off: the face's deformation over its neighbours' distance, or, where
         # they disagree about the depth (a jaw point between the still cheek and the moving chin), their spread.
