@@ -6,7 +6,9 @@ Detect Blobs on every frame, the ``seeds.json`` clicks, Solve Calibration Brim,
 Initialize 3D on frame 0, then Track Forwards [Sequence]; and again from the
 clicks a person makes on the last frame, Initialize 3D there and Track
 Backwards [Sequence].  Scored per marker (a point is the marker it is within
-1 mm of on the frame Initialize 3D ran on; every other frame is scored):
+1 mm of on the frame Initialize 3D ran on, or, for a point tracking made for a
+marker no point followed, on its sample nearest that frame; every other frame is
+scored):
 
 - **coverage**: marker-frames visible in >= 2 cameras that have a
   3D point within 3 mm of the truth.  Visibility leaves out, per camera, the
@@ -15,7 +17,8 @@ Backwards [Sequence].  Scored per marker (a point is the marker it is within
   counts only the markers Initialize 3D found;
 - **swaps**: points ever more than 3 mm off their marker, and such samples (stricter than the issue's "a
   point that jumps onto another marker": ``onto_another_marker`` lists the swapped points that were, on
-  some frame, nearer another marker than their own);
+  some frame, nearer another marker than their own); ``duplicated_markers``: markers that two points
+  followed on the same frame;
 - **rms_mm**: 3D error of the reconstructed samples within 3 mm (median too), and where it is
   (:func:`error_breakdown`): by the samples' number of blob views, and the mean error vector that every
   point shares;
@@ -122,7 +125,12 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
     pts = list(project.face_points())
     pos = np.array([np.where((q.status[:F] != ST_NONE)[:, None], q.pos[:F], np.nan) for q in pts])
     st = np.array([q.status[:F] for q in pts])
-    d0 = np.linalg.norm(pos[:, frame, None] - face[frame][None], axis=2)
+    # A point is identified on ``frame``, or, made while tracking (a marker no point followed), on its sample
+    # nearest that frame.
+    have = np.all(np.isfinite(pos), axis=2)                                      # (P, F)
+    at = np.array([frame if h[frame] or not h.any() else int(np.flatnonzero(h)[np.argmin(np.abs(
+        np.flatnonzero(h) - frame))]) for h in have], int)
+    d0 = np.linalg.norm(pos[np.arange(len(pts)), at][:, None] - face[at], axis=2) if len(pts) else np.zeros((0, 1))
     d0 = np.where(np.isnan(d0), np.inf, d0)
     ident = {i: int(d0[i].argmin()) for i in range(len(pts)) if d0[i].min() < 1.0}
     need = vis[:, :, :markers].sum(1) >= 2                                        # (F, M)
@@ -153,6 +161,14 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
     need, covered = need[scored], covered[scored]
     miss = (need & ~covered).sum(0)
     worst = np.argsort(-miss)[:6]
+    # Two points on one marker at once: a marker given a second point (by Initialize 3D, or while tracking).
+    twice = []
+    for m in set(ident.values()):
+        rows = [i for i, mm in ident.items() if mm == m]
+        if len(rows) > 1:
+            near = np.linalg.norm(pos[rows] - face[None, :, m], axis=2) <= SWAP_MM     # (r, F)
+            if np.any(near.sum(0) > 1):
+                twice.append(labels[m])
     init = np.zeros(need.shape[1], bool)
     init[list(set(ident.values()))] = True
     breakdown = error_breakdown(np.concatenate(vecs) if vecs else np.zeros((0, 3)),
@@ -163,8 +179,9 @@ def score(project, truth: dict, faint: list[set], markers: int, frame: int = 0) 
                             vis[:, :, :markers])
     return {**breakdown, "misses_by_detected_views": misses, "coverage": float(covered[need].mean()),
             "coverage_initialised": float(covered[:, init][need[:, init]].mean()),
-            "swapped_points": len(swapped), "swapped_samples": bad, "swapped": swapped[:10],
-            "onto_another_marker": jumped[:10],
+            "swapped_points": len(swapped), "duplicated_markers": len(twice), "swapped_samples": bad,
+            "swapped": swapped[:10],
+            "onto_another_marker": jumped[:10], "two_points_on_one_marker": twice[:10],
             "rms_mm": float(np.sqrt(np.mean(errs ** 2))) if len(errs) else float("nan"),
             "median_mm": float(np.median(errs)) if len(errs) else float("nan"),
             "worst_rms_mm": {k: round(v, 3) for k, v in sorted(per.items(), key=lambda kv: -kv[1])[:5]},

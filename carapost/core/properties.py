@@ -189,6 +189,10 @@ PROPERTY_TABLE: tuple[PropertyDef, ...] = (
        "mm", "Largest distance of a single-sensor result from its neighbour prediction."),
     _P("tracking", "blob_size_difference_threshold", "Blob Size Difference Threshold", float, 0.75, 0.0, 1.0, "",
        "How much a blob's width and height may change between frames (0 none, 1 any)."),
+    _P("tracking", "add_points_for_new_markers", "Add Points For New Markers", bool, True,
+       help="Give a marker that no point follows (hidden when Initialize 3D ran) a new, unlabelled point once "
+            "two frames in a row match it in two or more cameras, on the face and clear of every point. "
+            "Not in CaraPost's guide."),
     # Gap-Filling Parameters
     _P("gap_filling", "overwrite_existing_filled_gaps", "Overwrite Existing Filled Gaps", bool, False,
        help="Recompute gaps already filled (points with zero or one detection)."),

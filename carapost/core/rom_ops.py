@@ -269,7 +269,9 @@ def _params(project: Project, rom_p: dict):
     return TrackingParams.from_project(project, {
         "face_point_tracking_distance": rom_p["rom_face_point_tracking_distance"],
         "brim_point_tracking_distance": rom_p["rom_brim_point_tracking_distance"],
-        "max_allowed_3d_point_error": rom_p["rom_max_allowed_3d_point_error"]})
+        "max_allowed_3d_point_error": rom_p["rom_max_allowed_3d_point_error"],
+        # One frame is tracked from the ROM: its points are the ROM's, none are made.
+        "add_points_for_new_markers": False})
 
 
 def initialize_from_rom(project: Project, frame: int, brim_only: bool = False, images=None,

@@ -8,12 +8,14 @@ done so far make the command (``command.cancelled`` is True).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from scipy.spatial.transform import Rotation
 
 from ..commands import Command, CompoundCommand
-from ..edits import SetCameraPoses, SetPointData
+from ..edits import AddPoints, SetCameraPoses, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, FACE, SRC_DETECTION, SRC_NONE, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from ..progress import Cancelled, Progress, frame_payload
@@ -131,6 +133,10 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
                 if q.kind == BRIM and q.id in wanted and 0 <= q.brim_index < len(brim)}
     if not face and not brim_pts:
         raise CaraError(f"no points to track on frame {start}: initialise them first (Process > Initialize 3D)")
+    if params.add_points_for_new_markers and (single_frame or len(face) < len(list(project.face_points()))):
+        # A face point left out (not selected, or without a position on the start frame) is not where the
+        # tracker could see it: its marker would be given a second point.
+        params = replace(params, add_points_for_new_markers=False)
     name = ("Track Forwards" if direction > 0 else "Track Backwards") + \
         (" [Single Frame]" if single_frame else " [Sequence]")
     if progress is not None:
@@ -234,9 +240,10 @@ def _publish(progress: Progress, r, face_ids: np.ndarray, brim_ids: np.ndarray, 
 
         def cat(face, _key):
             return face
+    n = len(face_ids)      # new points (rows past the face points) are not in the project until the end
     progress.publish(r.frame, frame_payload(
-        ids, cat(r.status, "status"), cat(r.src, "src"), cat(r.uv, "uv"), cat(r.score, "score"),
-        pos=cat(r.X, "pos"), residual=cat(r.residual, "residual"), det=cat(r.det, "det"),
+        ids, cat(r.status[:n], "status"), cat(r.src[:n], "src"), cat(r.uv[:n], "uv"), cat(r.score[:n], "score"),
+        pos=cat(r.X[:n], "pos"), residual=cat(r.residual[:n], "residual"), det=cat(r.det[:n], "det"),
         cameras=(r.R, r.C)))
 
 
@@ -256,9 +263,15 @@ def _command(project, name, face, brim_pts, brim, results, detect_cmd) -> Comman
         fields = {"pos": ("X", np.float32), "status": ("status", np.uint8), "residual": ("residual", np.float16),
                   "src": ("src", np.uint8), "det": ("det", np.int32), "uv": ("uv", np.float32),
                   "score": ("score", np.float16)}
-        stacked = {k: np.array([getattr(r, a) for r in res], dt) for k, (a, dt) in fields.items()}
+        rows = max(len(r.status) for r in res)
+        stacked = {k: np.array([_padded(getattr(r, a), rows, k) for r in res], dt) for k, (a, dt) in fields.items()}
+        # Points for markers no point followed (engine step 10): the rows after the face points.
+        nid = project.next_point_id
+        new = [project.new_point(FACE, point_id=nid + j) for j in range(rows - len(face))]
+        if new:
+            cmds.append(AddPoints(new, name="Add Points For New Markers"))
         updates = [(q.id, lo, {k: np.ascontiguousarray(v[:, i]) for k, v in stacked.items()})
-                   for i, q in enumerate(face)]
+                   for i, q in enumerate(face + new)]
         if brim_pts:
             rows = _brim_rows(res, np.array(list(brim_pts), np.int64), brim)
             for j, q in enumerate(brim_pts.values()):
@@ -274,12 +287,26 @@ def _command(project, name, face, brim_pts, brim, results, detect_cmd) -> Comman
         per_frame = [int(np.count_nonzero(r.status != ST_NONE)) for r in res]
     cmd = CompoundCommand(name, cmds)
     frames = [r.frame for r in results]
+    added = sum(r.new for r in results)
     cmd.report = {"frames": n, "first": frames[0] if frames else None, "last": frames[-1] if frames else None,
-                  "points": len(face), "tracked_per_frame": per_frame}
-    mean = float(np.mean(per_frame)) / max(1, len(face)) if per_frame else 0.0
+                  "points": len(face), "new_points": added, "tracked_per_frame": per_frame}
+    mean = float(np.mean(per_frame)) / max(1, len(face) + added) if per_frame else 0.0
     cmd.summary = (f"{name}: {n} frames, {len(face)} face points, {100 * mean:.1f}% of point-frames tracked"
-                   + (f" (frames {frames[0]}-{frames[-1]})" if frames else ""))
+                   + (f" (frames {frames[0]}-{frames[-1]})" if frames else "")
+                   + (f"; {added} new points for markers no point followed" if added else ""))
     return cmd
+
+
+_EMPTY = {"X": np.nan, "status": ST_NONE, "residual": np.nan, "src": SRC_NONE, "det": -1, "uv": np.nan,
+          "score": np.nan}
+
+
+def _padded(a: np.ndarray, rows: int, key: str) -> np.ndarray:
+    """``a`` with empty rows appended up to ``rows``: frames before a new point was made."""
+    if len(a) == rows:
+        return a
+    pad = np.full((rows - len(a),) + a.shape[1:], _EMPTY["X" if key == "pos" else key], a.dtype)
+    return np.concatenate([a, pad])
 
 
 def track_forwards_sequence(project, frame: int, **kw) -> Command:
