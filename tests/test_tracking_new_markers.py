@@ -26,15 +26,16 @@ quiet = test_tracking.quiet
 M = 7
 
 
-def without_point(sc, m=M):
+def without_point(sc, m=M, sure_from=0):
     """A copy of ``sc`` whose marker ``m`` has no point (as if Initialize 3D had not found it), its blobs
-    scored as surely dots (the synthetic take's scores are drawn at random, 0.6-1)."""
+    scored as surely dots from frame ``sure_from`` on and as doubtful ones before (the synthetic take's
+    scores are drawn at random, 0.6-1)."""
     sc = copy.deepcopy(sc)
     for f in range(sc.project.frame_count):
         for s in range(sc.project.sensor_count):
             if sc.face_det[f, s, m] >= 0:
                 rec = sc.project.detections[s].frame(f).copy()
-                rec["score"][sc.face_det[f, s, m]] = 0.99
+                rec["score"][sc.face_det[f, s, m]] = 0.99 if f >= sure_from else 0.7
                 sc.project.detections[s].set_frame(f, rec)
     pid = next(p for p, mm in identify(sc, 0).items() if mm == m)
     DeletePoints([pid]).do(sc.project)
@@ -55,19 +56,33 @@ def test_a_marker_without_a_point_is_given_one_that_follows_it(quiet):
     assert "1 new points" in cmd.summary
     q = new[0]
     f = np.flatnonzero(q.status == ST_RECONSTRUCTED)
-    # Found on frames 1 and 2, made on 2, then tracked to the end like any other point.
-    assert f[0] == 2 and np.array_equal(f, np.arange(2, sc.project.frame_count))
+    # Found on frames 1 and 2, made on 2, then tracked to the end like any other point (and back to frame 1).
+    assert np.array_equal(f, np.arange(1, sc.project.frame_count))
     assert np.max(np.linalg.norm(q.pos[f] - sc.face[f, M], axis=1)) < 0.2
     # Its views are the marker's own detections.
     for fr in f:
         for s in np.flatnonzero(q.src[fr] == SRC_DETECTION):
             assert q.det[fr, s] == sc.face_det[fr, s, M]
-    assert q.label == "" and np.all(q.status[:2] == ST_NONE)
+    assert q.label == "" and q.status[0] == ST_NONE
     # One undo step takes the tracking and the new point back.
     cmd.undo(sc.project)
     assert set(sc.project.points) == before
     cmd.do(sc.project)
     assert np.array_equal(sc.project.points[q.id].status, q.status)
+
+
+def test_a_new_point_is_tracked_back_over_the_frames_before_it_was_sure(quiet):
+    # The marker's blobs score 0.7 until frame 10 (a dot half under the hair): no point is made from them, but
+    # once one is made on frame 11 it is tracked back to frame 1 (frame 0 is the start frame: left as it is).
+    sc = without_point(quiet, sure_from=10)
+    cmd, new, _ = run(sc)
+    assert len(new) == 1
+    q = new[0]
+    f = np.flatnonzero(q.status == ST_RECONSTRUCTED)
+    assert np.array_equal(f, np.arange(1, sc.project.frame_count))
+    assert np.max(np.linalg.norm(q.pos[f] - sc.face[f, M], axis=1)) < 0.2
+    for fr in range(1, 11):
+        assert set(q.det[fr][q.src[fr] == SRC_DETECTION]) <= set(sc.face_det[fr, :, M])
 
 
 def test_no_point_is_made_when_the_property_is_off_or_a_point_is_left_out(quiet):

@@ -197,11 +197,65 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
                 progress.step(1)
     except Cancelled:
         cancelled = True
+    fill: dict = {}
+    try:
+        if not cancelled:
+            fill = _back_fill(project, results, start, direction, recs_of, params, source, pool, brim, len(face),
+                              progress)
+    except Cancelled:
+        cancelled = True
     finally:
         pool.close()
-    cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd)
+    cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd, fill)
     cmd.cancelled = cancelled
     return cmd
+
+
+#: A point made while tracking (engine step 10) is then tracked back from the frame it was made on towards
+#: the start frame, over the frames where its marker was in view but not yet sure enough to make a point,
+#: until it has been lost this many frames in a row.
+BACK_FILL_LOST = 10
+
+
+def _back_fill(project, results, start, direction, recs_of, params, source, pool, brim, n_face, progress,
+               fill: dict | None = None) -> dict:
+    """The frames before the new points were made, tracked back from the last frame one was made on.
+
+    Every point takes part (the new points' neighbours predict them), but only the new points' rows of
+    the frames before each was made are used (:func:`_command`).  Fills ``fill`` (frame -> FrameResult),
+    which holds what was done if the run is cancelled meanwhile, and returns it.
+    """
+    fill = {} if fill is None else fill
+    made = [i for i, r in enumerate(results) if r.new]
+    if not made:
+        return fill
+    r0 = results[made[-1]]
+    S = project.sensor_count
+    rig = RigState(project.rig.cameras_at(start))
+    rig.R, rig.C = r0.R.copy(), r0.C.copy()
+    recs0 = recs_of(r0.frame)
+    size0 = np.full(r0.uv.shape, np.nan)
+    for s in range(S):
+        use = (r0.src[:, s] == SRC_DETECTION) & (r0.det[:, s] >= 0)
+        size0[use, s, 0] = recs0[s]["major"][r0.det[use, s]]
+        size0[use, s, 1] = recs0[s]["minor"][r0.det[use, s]]
+    tracker = FrameTracker(rig, r0.X, r0.uv, size0, brim, replace(params, add_points_for_new_markers=False),
+                           images=source, pool=pool, start_frame=r0.frame,
+                           brim_radius=project.brim.radius if len(brim) else None)
+    new_rows = np.arange(n_face, len(r0.status))
+    lost = np.zeros(len(new_rows), int)
+    prev = None
+    for f in range(r0.frame - direction, start, -direction):
+        if progress is not None:
+            progress.check()
+        res = tracker.step(f, recs_of(f))
+        if res.retract is not None and prev is not None:
+            prev.take_back(res.retract)
+        fill[f] = prev = res
+        lost = np.where(res.status[new_rows] != ST_NONE, 0, lost + 1)
+        if np.all(lost >= BACK_FILL_LOST):
+            break
+    return fill
 
 
 def _brim_rows(res, idx: np.ndarray, brim) -> dict[str, np.ndarray]:
@@ -247,7 +301,7 @@ def _publish(progress: Progress, r, face_ids: np.ndarray, brim_ids: np.ndarray, 
         cameras=(r.R, r.C)))
 
 
-def _command(project, name, face, brim_pts, brim, results, detect_cmd) -> Command:
+def _command(project, name, face, brim_pts, brim, results, detect_cmd, fill=None) -> Command:
     S = project.sensor_count
     cmds: list[Command] = []
     if detect_cmd is not None:
@@ -264,7 +318,9 @@ def _command(project, name, face, brim_pts, brim, results, detect_cmd) -> Comman
                   "src": ("src", np.uint8), "det": ("det", np.int32), "uv": ("uv", np.float32),
                   "score": ("score", np.float16)}
         rows = max(len(r.status) for r in res)
-        stacked = {k: np.array([_padded(getattr(r, a), rows, k) for r in res], dt) for k, (a, dt) in fields.items()}
+        fill = fill or {}
+        stacked = {k: np.array([_padded(getattr(r, a), rows, k, getattr(fill.get(r.frame), a, None)) for r in res],
+                               dt) for k, (a, dt) in fields.items()}
         # Points for markers no point followed (engine step 10): the rows after the face points.
         nid = project.next_point_id
         new = [project.new_point(FACE, point_id=nid + j) for j in range(rows - len(face))]
@@ -301,11 +357,15 @@ _EMPTY = {"X": np.nan, "status": ST_NONE, "residual": np.nan, "src": SRC_NONE, "
           "score": np.nan}
 
 
-def _padded(a: np.ndarray, rows: int, key: str) -> np.ndarray:
-    """``a`` with empty rows appended up to ``rows``: frames before a new point was made."""
+def _padded(a: np.ndarray, rows: int, key: str, back: np.ndarray | None = None) -> np.ndarray:
+    """``a`` with rows appended up to ``rows`` (frames before a new point was made): from ``back``, the frame
+    tracked back (:func:`_back_fill`), where it has them, else empty."""
     if len(a) == rows:
         return a
     pad = np.full((rows - len(a),) + a.shape[1:], _EMPTY["X" if key == "pos" else key], a.dtype)
+    if back is not None:
+        have = back[len(a):rows]
+        pad[:len(have)] = have
     return np.concatenate([a, pad])
 
 
