@@ -122,6 +122,14 @@ def test_growth_goes_on_past_sparse_markers_with_the_other_caddys_support():
     assert frac >= 0.97 and mism == 0 and rms <= 0.08, (frac, mism, rms)
 
 
+def _seen_by_all():
+    """A 35-marker scene (seed 1): the scene, its project, frame 0's marker detections, cameras, and the last
+    marker every camera sees."""
+    sc = make_scene(35, seed=1)
+    F = sc.face_det[0]
+    return sc, sc.project, F, sc.cameras[0], max(m for m in range(35) if (F[:, m] >= 0).all())
+
+
 def test_a_caddy_match_pulled_along_its_epipolar_line_is_made_again_across_the_caddies():
     """A nose tip's blob merged with the nostrils' shadow in one camera of a caddy, and not found at all in
     a camera of the other: the caddy's pair still matches (the error runs along its epipolar line) and
@@ -129,12 +137,8 @@ def test_a_caddy_match_pulled_along_its_epipolar_line_is_made_again_across_the_c
     good detection and the other caddy's."""
     from carapost.core.camera import epipolar_line
 
-    sc = make_scene(35, seed=1)
-    pr = sc.project
-    F = sc.face_det[0]
-    cams = sc.cameras[0]
+    sc, pr, F, cams, m = _seen_by_all()
     (a, b), (c, _d) = pr.caddies()
-    m = max(m for m in range(35) if (F[:, m] >= 0).all())
     ra = pr.detections[a].frame(0)
     line = np.asarray(epipolar_line(cams[a], cams[b], np.array([ra["x"][F[a, m]], ra["y"][F[a, m]]])), float)
     along = np.array([line[1], -line[0]]) / np.hypot(line[0], line[1])
@@ -158,12 +162,8 @@ def test_a_good_caddy_pair_is_not_made_again_with_a_blob_that_puts_it_off_the_fa
     cheek.  A pair is made again only where that brings it nearer the surface of the points around it."""
     from carapost.core.calib.init3d import _surface_distance
 
-    sc = make_scene(35, seed=1)
-    pr = sc.project
-    F = sc.face_det[0]
-    cams = sc.cameras[0]
+    sc, pr, F, cams, m = _seen_by_all()
     (a, b), (c, d) = pr.caddies()
-    m = max(m for m in range(35) if (F[:, m] >= 0).all())
     for s in (c, d):                             # the other caddy does not find the dot
         r = pr.detections[s].frame(0).copy()
         r["x"][F[s, m]] += 400.0
@@ -417,13 +417,10 @@ def test_of_two_views_either_of_which_explains_the_third_the_larger_blob_goes():
     assert (odd_views_out(cams, uv, caddies, sizes) == plain).all()
 
 
-def test_a_one_caddy_point_finds_the_other_caddys_view_along_its_depth():
-    """A point of one caddy's pair, 1.5 mm off along its line of sight (half-pixel errors along that pair's
-    short baseline do that), projects pixels away from its blob in the other caddy's cameras: too far for the
-    attach gate, but on the projection of its depth range, where that blob is the only detection."""
-    from carapost.core.calib.depth_attach import attach_along_depth
-    from carapost.core.calib.init3d import ATTACH_GATE_PX
-
+def _one_caddy_points(depth_mm):
+    """25 markers of a scene, each a point of caddy 1's pair only, put ``depth_mm`` off along that caddy's line
+    of sight; returns the cameras, caddies, every camera's blobs (the markers' projections), the points and
+    the lines of sight."""
     sc = make_scene(35, seed=2)
     cams = sc.cameras[0]
     caddies = sc.project.caddies()
@@ -431,7 +428,7 @@ def test_a_one_caddy_point_finds_the_other_caddys_view_along_its_depth():
     xy = [c.project(X) for c in cams]
     centre = np.mean([cams[s].position for s in caddies[1]], axis=0)
     sight = (X - centre) / np.linalg.norm(X - centre, axis=1, keepdims=True)
-    Xoff = X + 1.5 * sight
+    Xoff = X + depth_mm * sight
     pts = []
     for k in range(len(X)):
         uv = np.full((4, 2), np.nan)
@@ -439,13 +436,29 @@ def test_a_one_caddy_point_finds_the_other_caddys_view_along_its_depth():
         for s in caddies[1]:
             uv[s], det[s] = xy[s][k], k
         pts.append({"id": None, "det": det, "uv": uv, "X": Xoff[k]})
-    miss = np.linalg.norm(cams[0].project(Xoff) - xy[0], axis=1)
-    assert np.median(miss) > ATTACH_GATE_PX           # the plain attach gate cannot take them
+    return cams, caddies, xy, pts, sight
+
+
+def _camera_0_views_found(cams, caddies, xy, pts):
+    """Attach along depth; (right, wrong) camera-0 views of the points."""
+    from carapost.core.calib.depth_attach import attach_along_depth
+
     blocked = [np.zeros(len(v), bool) for v in xy]
     attach_along_depth(pts, cams, xy, blocked, caddies)
     got = [d["det"][0] for d in pts]
-    right = sum(g == k for k, g in enumerate(got))
-    wrong = sum(g >= 0 and g != k for k, g in enumerate(got))
+    return sum(g == k for k, g in enumerate(got)), sum(g >= 0 and g != k for k, g in enumerate(got))
+
+
+def test_a_one_caddy_point_finds_the_other_caddys_view_along_its_depth():
+    """A point of one caddy's pair, 1.5 mm off along its line of sight (half-pixel errors along that pair's
+    short baseline do that), projects pixels away from its blob in the other caddy's cameras: too far for the
+    attach gate, but on the projection of its depth range, where that blob is the only detection."""
+    from carapost.core.calib.init3d import ATTACH_GATE_PX
+
+    cams, caddies, xy, pts, _ = _one_caddy_points(1.5)
+    miss = np.linalg.norm(cams[0].project(np.array([d["X"] for d in pts])) - xy[0], axis=1)
+    assert np.median(miss) > ATTACH_GATE_PX           # the plain attach gate cannot take them
+    right, wrong = _camera_0_views_found(cams, caddies, xy, pts)
     assert wrong == 0 and right >= 20, (right, wrong)
 
 
@@ -453,32 +466,13 @@ def test_a_one_caddy_point_on_a_grown_blob_finds_the_other_caddys_view_along_its
     """A brow dot's blob grown into the hair in one camera of a caddy, 2.7 px off, put the pair's point
     3.9 mm deep, and the other caddy's blob lay 1.6 px beside the projection of that depth range (the
     sample's 156 black markers, seed 0, frame 299): the range reaches 5 mm and takes blobs within 1.6 px."""
-    from carapost.core.calib.depth_attach import attach_along_depth
-
-    sc = make_scene(35, seed=2)
-    cams = sc.cameras[0]
-    caddies = sc.project.caddies()
-    X = sc.face[0][:25]
-    xy = [c.project(X) for c in cams]
-    centre = np.mean([cams[s].position for s in caddies[1]], axis=0)
-    sight = (X - centre) / np.linalg.norm(X - centre, axis=1, keepdims=True)
-    Xoff = X + 4.0 * sight
+    cams, caddies, xy, pts, sight = _one_caddy_points(4.0)
+    Xoff = np.array([d["X"] for d in pts])
     # Camera 0's blobs 1.3 px beside the projection of each point's line of sight.
     a, b = cams[0].project(Xoff - sight), cams[0].project(Xoff + sight)
     across = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=1)
     xy[0] = xy[0] + 1.3 * across / np.linalg.norm(across, axis=1, keepdims=True)
-    pts = []
-    for k in range(len(X)):
-        uv = np.full((4, 2), np.nan)
-        det = np.full(4, -1)
-        for s in caddies[1]:
-            uv[s], det[s] = xy[s][k], k
-        pts.append({"id": None, "det": det, "uv": uv, "X": Xoff[k]})
-    blocked = [np.zeros(len(v), bool) for v in xy]
-    attach_along_depth(pts, cams, xy, blocked, caddies)
-    got = [d["det"][0] for d in pts]
-    right = sum(g == k for k, g in enumerate(got))
-    wrong = sum(g >= 0 and g != k for k, g in enumerate(got))
+    right, wrong = _camera_0_views_found(cams, caddies, xy, pts)
     assert wrong == 0 and right >= 20, (right, wrong)
 
 
