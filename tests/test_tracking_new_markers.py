@@ -92,7 +92,8 @@ def test_no_point_is_made_when_the_property_is_off_or_a_point_is_left_out(quiet)
     sc.project.properties.set("tracking.add_points_for_new_markers", True)
     # Tracking only some points: the others' markers are not where the tracker could see them.
     some = [q.id for q in sc.project.face_points()][:20]
-    assert run(sc, point_ids=some)[1] == []
+    cmd, new, _ = run(sc, point_ids=some)
+    assert new == [] and "no points made for new markers: 14 face point(s) not tracked" in cmd.summary
 
 
 def test_a_lost_marker_coming_back_is_picked_up_by_its_own_point_not_given_another(quiet):

@@ -133,7 +133,9 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
                 if q.kind == BRIM and q.id in wanted and 0 <= q.brim_index < len(brim)}
     if not face and not brim_pts:
         raise CaraError(f"no points to track on frame {start}: initialise them first (Process > Initialize 3D)")
-    if params.add_points_for_new_markers and (single_frame or len(face) < len(list(project.face_points()))):
+    left_out = len(list(project.face_points())) - len(face)
+    unmade = bool(params.add_points_for_new_markers and left_out and not single_frame)
+    if params.add_points_for_new_markers and (single_frame or left_out):
         # A face point left out (not selected, or without a position on the start frame) is not where the
         # tracker could see it: its marker would be given a second point.
         params = replace(params, add_points_for_new_markers=False)
@@ -208,6 +210,9 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
         pool.close()
     cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd, fill)
     cmd.cancelled = cancelled
+    if unmade:
+        cmd.summary += (f"; no points made for new markers: {left_out} face point(s) not tracked (not selected, "
+                        f"or without a position on frame {start})")
     return cmd
 
 
