@@ -91,14 +91,13 @@ def process_main(args) -> int:
 
         images = TakeFrames(project)
         try:
-            if frame < end:
-                done = _step(f"Track Forwards [Sequence] {frame}-{end}")
-                doc.run(track(project, frame, +1, images=images))
-                done()
-            if frame > start:
-                done = _step(f"Track Backwards [Sequence] {frame}-{start}")
-                doc.run(track(project, frame, -1, images=images))
-                done()
+            for way, stop in ((+1, end), (-1, start)):
+                if (stop - frame) * way > 0:
+                    done = _step(f"Track {'Forwards' if way > 0 else 'Backwards'} [Sequence] {frame}-{stop}")
+                    cmd = track(project, frame, way, images=images)
+                    doc.run(cmd)
+                    done()
+                    print(f"  {cmd.summary}", file=sys.stderr)
         finally:
             images.close()
         done = _step("Interpolate Gaps")
