@@ -7,10 +7,12 @@ detections no point took are matched across the cameras here.  A match is a
 candidate when its rays meet, when it lies on the face (near the plane of its
 nearest tracked points, within reach of them), when it keeps clear of every
 point (tracked, or a lost one's prediction: a lost marker coming back is picked
-up by its own point, not given another) and of the brim, and when no other match
-contests its detections.  The tracker makes a point of a candidate only once the
-next frame finds it again where its neighbours carried it
-(:meth:`.engine.FrameTracker._add_new_markers`).
+up by its own point, not given another) and of the brim, when no other match
+contests its detections, and when its blobs look like the markers' (classifier
+score, size in mm, and with images the contrast against the skin: the skin's
+freckles and an eye's highlight match across cameras too).  The tracker makes a
+point of a candidate only once the next frame finds it again where its
+neighbours carried it (:meth:`.engine.FrameTracker._add_new_markers`).
 """
 from __future__ import annotations
 
@@ -52,7 +54,7 @@ def fundamental(rig: RigState, a: int, b: int) -> np.ndarray:
     return rig.Kinv[b].T @ rig.R[b] @ tx @ rig.R[a].T @ rig.Kinv[a]
 
 
-def _pairs(rig: RigState, xy: list[np.ndarray], limit: float) -> tuple[np.ndarray, np.ndarray]:
+def _pairs(rig: RigState, xy: list[np.ndarray], limit: float) -> np.ndarray:
     """Every two-camera match of free detections whose epipolar distance is within ``limit``: choice (H, S)."""
     S = rig.S
     rows = []
