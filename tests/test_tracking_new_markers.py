@@ -173,3 +173,27 @@ def test_a_freckle_does_not_stand_out_from_the_skin_as_a_marker_does():
     cand = [np.array([[200.5, 90.0], [330.0, 90.0]])]
     keep = spawn.stands_out([lambda: img], np.array([[0], [1]]), cand, [np.array([8.0, 8.0])], ref_xy, ref_major)
     assert keep.tolist() == [False, True]
+
+
+def test_a_cancelled_run_keeps_the_points_it_made_and_a_live_display_sees_the_known_points_only(quiet):
+    from carapost.core.commands import UndoStack
+    from carapost.core.progress import Progress
+
+    sc = without_point(quiet)
+    pr = sc.project
+    known = {q.id for q in pr.face_points()}
+    d0 = pr.digest()
+    seen_ids = set()
+    prog = Progress(listener=lambda frame, payload: seen_ids.update(payload["ids"].tolist()))
+    prog._callback = lambda done, total, msg: prog.cancel() if done >= 10 else None
+    cmd = track(pr, 0, 1, progress=prog)
+    assert cmd.cancelled and cmd.report["frames"] == 10 and cmd.report["new_points"] == 1
+    # Published while tracking: the points the project holds (face and brim), not the one made meanwhile.
+    assert known <= seen_ids <= set(pr.points)
+    stack = UndoStack(pr)
+    stack.push(cmd)
+    q = next(q for q in pr.face_points() if q.id not in known)
+    # Made on frame 2 and kept to the last frame done; a cancelled run is not tracked back.
+    assert np.array_equal(np.flatnonzero(q.status == ST_RECONSTRUCTED), np.arange(2, 11))
+    stack.undo()
+    assert pr.digest() == d0
