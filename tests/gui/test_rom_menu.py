@@ -45,6 +45,10 @@ def test_load_rom_initialize_undo_and_correspondence(qtbot, rom_file):
     win.action("process.load_rom").trigger()
     _wait(qtbot, win)
     assert stack.names() == ["Load ROM"] and p.rom_path == str(rom_file)
+    # The 3D view draws the ROM frame's points too: its face points and brim markers.
+    from carapost.gui.view3d import rom_positions
+    rom = rom_ops.loaded_rom(p).rom
+    assert len(rom_positions(win.session)) == sum(1 for q in rom.face_points()) + len(rom.brim.markers)
 
     # The 2D context menu's ROM switch draws the ROM points, pale blue, in every view.
     titles = [a.text() for a in win.grid.build_context_menu(win.grid.views[0]).actions()]
