@@ -197,3 +197,25 @@ def test_a_cancelled_run_keeps_the_points_it_made_and_a_live_display_sees_the_kn
     assert np.array_equal(np.flatnonzero(q.status == ST_RECONSTRUCTED), np.arange(2, 11))
     stack.undo()
     assert pr.digest() == d0
+
+
+@pytest.mark.parametrize("level,made", [(30, True), (135, False)])
+def test_with_images_a_match_as_faint_as_a_freckle_makes_no_point(quiet, level, made):
+    """Through the tracker: marker M's blobs score 0.99 and have a marker's size, but where the images show it
+    grey level 135 on skin of ~160 (the markers 30), it does not stand out as a marker does."""
+    import cv2
+
+    sc = without_point(quiet)
+    cache = {}
+
+    def images(s, f):
+        if (s, f) not in cache:
+            img = test_tracking.render(sc, s, f)
+            x, y = sc.cameras[f][s].project(sc.face[f, M][None])[0]
+            if sc.face_det[f, s, M] >= 0:
+                cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 16 * 4, level, -1, cv2.LINE_AA, 4)
+            cache[(s, f)] = img
+        return cache[(s, f)]
+
+    cmd, new, _ = run(sc, end_frame=12, images=images)
+    assert len(new) == int(made)
