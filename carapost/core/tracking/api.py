@@ -222,15 +222,15 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
 BACK_FILL_LOST = 10
 
 
-def _back_fill(project, results, start, direction, recs_of, params, source, pool, brim, n_face, progress,
-               fill: dict | None = None) -> dict:
+def _back_fill(project, results, start, direction, recs_of, params, source, pool, brim, n_face,
+               progress) -> dict:
     """The frames before the new points were made, tracked back from the last frame one was made on.
 
     Every point takes part (the new points' neighbours predict them), but only the new points' rows of
-    the frames before each was made are used (:func:`_command`).  Fills ``fill`` (frame -> FrameResult),
-    which holds what was done if the run is cancelled meanwhile, and returns it.
+    the frames before each was made are used (:func:`_command`).  Returns frame -> FrameResult; a cancel
+    meanwhile raises :class:`Cancelled` and leaves the run without them.
     """
-    fill = {} if fill is None else fill
+    fill: dict = {}
     made = [i for i, r in enumerate(results) if r.new]
     if not made:
         return fill

@@ -387,7 +387,7 @@ class FrameTracker(NewPoints):
         self._blob_w = np.ones((self.N, self.S))           # this frame's blob views' weights (:func:`blob_weight`)
         self._el = round_views((self.N, self.S))            # and their elongation (:func:`elongation`)
         # How far each prediction can be off: its neighbours' distance scales the face's deformation between them.
-        self.pred_sd = PRED_MM_PER_MM * elastic.spacing(self.X)
+        self.pred_sd = self._prediction_sd(elastic.spacing(self.X))
         # The variance (mm²) of each point's average with its prediction on the last frame (inf: none; see
         # CARRIED_Q), and this frame's (:meth:`_steady_depth`), until the frame's end decides who carries it on.
         self.post_var = np.full(self.N, np.inf)
@@ -749,6 +749,11 @@ class FrameTracker(NewPoints):
         return res
 
     # --------------------------------------------------------------- sub-steps
+    @staticmethod
+    def _prediction_sd(spacing):
+        """How far (mm) a point's neighbours' prediction can be off, from its spacing (:data:`PRED_MM_PER_MM`)."""
+        return PRED_MM_PER_MM * spacing
+
     def _view_weights(self, src, rows=slice(None)):
         """This frame's triangulation weights of the views ``src[rows]``: (:func:`confidence`, elongation)."""
         return confidence(src[rows], blob=self._blob_w[rows]), self._el[rows]

@@ -32,8 +32,9 @@ class NewPoints:
         r, s, g = fd.attached(res.det, (res.src == SRC_DETECTION) & measured[:, None])
         marker_mm = float(np.median(fd.size_all[g, 0] * spawn.view_depth(rig, res.X[r])[np.arange(len(r)), s]
                                     / rig.K[s, 0, 0])) if len(r) else None
-        choice, Xn = spawn.candidates(rig, xy, res.X[measured], known, self.pred_sd / _pred_mm_per_mm(), self.brim,
-                                      blobs=blobs, marker_mm=marker_mm)
+        spacing = self.pred_sd / self._prediction_sd(1.0)
+        choice, Xn = spawn.candidates(rig, xy, res.X[measured], known, spacing, self.brim, blobs=blobs,
+                                      marker_mm=marker_mm)
         if len(Xn) and self.images is not None:
             raw = [fd.raw[s][ids[s]] for s in range(self.S)]
             ref = [g[s == k] for k in range(self.S)]             # the measured points' blob views, per sensor
@@ -94,7 +95,7 @@ class NewPoints:
         self.tentative = grow(self.tentative, np.zeros(n, bool))
         self.tentative_views = grow(self.tentative_views, np.zeros((n, S), bool))
         self._blob_w, self._el = grow(self._blob_w, np.ones((n, S))), grow(self._el, round_views((n, S)))
-        self.pred_sd = grow(self.pred_sd, _pred_mm_per_mm() * elastic.spacing(everyone)[N:])
+        self.pred_sd = grow(self.pred_sd, self._prediction_sd(elastic.spacing(everyone)[N:]))
         self.post_var = grow(self.post_var, np.full(n, np.inf))
         self._post_new = grow(self._post_new, np.full(n, np.inf))
         self.blob_frame = grow(self.blob_frame, np.where(valid, frame, -1))
@@ -105,11 +106,3 @@ class NewPoints:
         res.uv = grow(res.uv, uv_raw)
         res.score = grow(res.score, np.where(valid, 1.0, np.nan))
         res.new = n
-
-
-
-def _pred_mm_per_mm() -> float:
-    """:data:`.engine.PRED_MM_PER_MM` (read at call time: the engine imports this module)."""
-    from .engine import PRED_MM_PER_MM
-
-    return PRED_MM_PER_MM

@@ -21,6 +21,7 @@ from itertools import combinations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..camera import fundamental_matrix
 from .geometry import RigState, reprojection, triangulate
 
 #: Largest reprojection error (px) of any view of a candidate: blob centres are good to a tenth of a pixel.
@@ -47,22 +48,16 @@ MIN_SCORE = 0.9
 SIZE_RANGE = (0.75, 1.4)
 
 
-def fundamental(rig: RigState, a: int, b: int) -> np.ndarray:
-    """``F`` with ``x_b^T F x_a = 0`` for corrected pixels of cameras ``a`` and ``b`` (``R`` world to camera)."""
-    t = rig.C[a] - rig.C[b]
-    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
-    return rig.Kinv[b].T @ rig.R[b] @ tx @ rig.R[a].T @ rig.Kinv[a]
-
-
 def _pairs(rig: RigState, xy: list[np.ndarray], limit: float) -> np.ndarray:
     """Every two-camera match of free detections whose epipolar distance is within ``limit``: choice (H, S)."""
     S = rig.S
     rows = []
+    cams = rig.to_cameras()
     for a, b in combinations(range(S), 2):
         na, nb = len(xy[a]), len(xy[b])
         if not na or not nb:
             continue
-        F = fundamental(rig, a, b)
+        F = fundamental_matrix(cams[a], cams[b])
         ha = np.column_stack([xy[a], np.ones(na)])
         hb = np.column_stack([xy[b], np.ones(nb)])
         lb = ha @ F.T                                   # lines in b of a's detections (na, 3)
