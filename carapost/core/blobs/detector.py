@@ -262,13 +262,19 @@ DRIFT = 1.0
 RESCUE_LOGIT = 2.4
 #: A fit that holds its candidate and that stage 2 scores this high is not looked at again.
 RESCUE_ABOVE = 0.9
+#: A grown fit that holds its candidate and has a clean edge of its own is a larger blob the candidate is part
+#: of, unless stage 2 scores it under this (the guide's default threshold): then it is the dot measured with a
+#: bright or dark region around it, and the candidate's own edge is looked for too (a saturated white nose-tip
+#: dot on the nose's specular highlight, measured 19.5 x 13.5 px where it is 11.4 x 10.2; docs/blobs.md,
+#: "Session 27").
+HELD_BELOW = 0.4
 #: A fit whose semi-major axis is this many times its candidate's radius was drawn off its dot (it took in what
 #: the dot touches) when its own edge says so.
 GROWN = 1.5
 
 
 def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, ang, ok, extra,
-                    among=None) -> np.ndarray:
+                    among=None, weak=None) -> np.ndarray:
     """Fits drawn off their candidate's dot are replaced by the dot's own edge ellipse (in place).
 
     The intensity measurement weighs every pixel of its window, so a small dot
@@ -279,7 +285,9 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     and the candidate's is (:func:`.edges.edge_ellipses`), the candidate's
     edge ellipse is the blob; its stage-2 measurements are taken again in a
     window about it (one solve, whose centre is not used).  Only fits in ``among``
-    (all by default) are looked at.  Returns which fits were replaced.
+    (all by default) are looked at.  A fit in ``weak`` (stage 2 scores it under
+    :data:`HELD_BELOW`) is not taken for a larger blob its candidate is part of,
+    however clean its own edge.  Returns which fits were replaced.
     """
     r0 = cand.radius[sel]
     grown = 0.5 * major > GROWN * r0
@@ -301,6 +309,8 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     # A fit that holds its candidate may be a larger blob the candidate is part of: its own clean
     # edge says so.  One that left its candidate behind says nothing about it.
     held = np.where(moved[idx] <= 0.5 * minor[idx], major[idx], 0.0)
+    if weak is not None:
+        held[weak[idx]] = 0.0
     # A dot measured with the hair it touches: that side of its own edge is spoilt too (its best arc).
     e = edge_ellipses(bright, sx, sy, r0[idx], (x[idx], y[idx], held, minor[idx], ang[idx]), grown[idx],
                       flat=not cand.white)
@@ -394,13 +404,14 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     x, y, major, minor, ang, ok, extra = fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel],
                                                          cand.noise)
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
-    among = None
+    among = weak = None
     if model.stage2 is not None:
         # Fits stage 2 already believes, holding their candidate, are not looked at again (the edge
         # search costs ~50 us a candidate; most drifted candidates are coarse octaves' of a clean blob).
         p0 = model.stage2.predict(_fit_features(cand, sel, logit1, x, y, major, minor, extra, np.zeros(len(sel))))
         among = ~(ok & (p0 >= RESCUE_ABOVE) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
-    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among)
+        weak = p0 < HELD_BELOW
+    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among, weak)
     # The centre may wander to a neighbour: the candidate must stay inside the blob found.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)
