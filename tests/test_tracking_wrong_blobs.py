@@ -327,7 +327,8 @@ def test_a_close_pair_and_a_wide_view_are_judged_by_the_points_own_motion(quiet,
     point, dropped it: the pair put the point 1.9-3.1 mm off.  Where the neighbours cannot predict a
     point that moved slowly (``MOTION_JUDGE_MM`` a frame), its own constant-velocity prediction decides
     which view goes: here the biased view of the pair.  A point that moved faster keeps the old rule
-    (its own motion is no judge in a jerk: a chin dot's went 3.4 mm off at a jaw's turn).
+    (its own motion is no judge in a jerk: a chin dot's went 3.4 mm off at a jaw's turn), and the close
+    pair left, with no neighbour to bound its depth, is not measured on that frame (session 27).
     """
     T, rig, X, raw = tracker_after(quiet)
     m = 3
@@ -341,13 +342,13 @@ def test_a_close_pair_and_a_wide_view_are_judged_by_the_points_own_motion(quiet,
     recs, index = recs_from(raw2, present)
     r = T.step(1, recs)
     err = np.linalg.norm(r.X[m] - X[m])
-    assert r.det[m, 0] == index[m, 0]
     if kept:
+        assert r.det[m, 0] == index[m, 0]
         assert r.det[m, 3] == index[m, 3] and r.det[m, 1] != index[m, 1]
         assert err < 0.1, err
     else:
+        assert r.status[m] == ST_NONE and np.isnan(err), err
         assert r.det[m, 3] != index[m, 3]
-        assert err > 1.0, err
 
 
 def test_a_pair_no_prediction_puts_there_is_no_anchor(quiet):

@@ -653,6 +653,7 @@ class FrameTracker(NewPoints):
         # 7. Remove bad 3D points: inconsistent with the neighbours' prediction.
         measured = finite_rows(X)
         X, pred, clamped = self._steady_depth(rig, X, valid, measured, self._view_weights(src)[0])
+        measured &= finite_rows(X)
         X = self._patch_depth(rig, X, uv_c, src, measured, motion)
         if p.remove_bad_3d_points and np.any(measured):
             # Three or more agreeing blob views outweigh a prediction: a jaw speeding up from 3.6 to 9 mm a
@@ -1109,6 +1110,8 @@ class FrameTracker(NewPoints):
         Each average's variance (mm², inf where not averaged) goes to ``self._post_new``: the next frame's
         prediction carries it (:data:`CARRIED_Q`).
 
+        A narrow point that no neighbour predicts is not measured (its row of ``X`` is NaN).
+
         Every measured point's position is first averaged with the prediction, each weighted by
         its certainty (:func:`fuse_depth`); the bound applies to the average.  A narrow point more
         than ``OFF_DEPTH_VOTE_MM`` deep of its firm neighbours' prediction does not vote in the
@@ -1152,6 +1155,10 @@ class FrameTracker(NewPoints):
             sd = np.maximum(spread, np.minimum(self.pred_sd, carried))
         X = fuse_depth(X, information(rig, X, valid & measured[:, None], weight), pred, sd, measured,
                        self._post_new)
+        # A close pair's depth with no neighbour to bound it is a guess within millimetres: not a measurement
+        # (a chin dot with the jaw open, every neighbour lost, met 4.6 mm deep on cameras 0 and 1 at 4.3 mm a px;
+        # its own motion was 3.4 mm off too).  Where the neighbours come back, so does the point.
+        X[narrow & ~finite_rows(pred)] = np.nan
         rows = np.flatnonzero(narrow & finite_rows(pred))
         if len(rows) == 0:
             return X, pred, clamped
