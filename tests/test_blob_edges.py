@@ -427,21 +427,28 @@ def test_a_white_lower_lip_dot_grown_into_the_teeth_is_found_from_its_own_edge(m
     3.1 px off); its candidate's own edge outlines the dot (9.7 x 4.1 px, 0.4 px off).  Grown 1.7 times its
     candidate's radius, it was under the 1.8 that counted as drawn off for the candidate's edge to be tried."""
     from carapost.core.blobs import detector
+
+    error = _white_dot_error(markers=35, frames=300, seed=1, frame=92, camera=0, label="Lip_Lower_L")
+    assert error() < 0.5
+    monkeypatch.setattr(detector, "GROWN", 1.8)
+    assert error() > 1.5
+
+
+def _white_dot_error(markers, frames, seed, frame, camera, label):
+    """A function giving the white detector's distance (px) to ``label``'s dot in one view of a sample take."""
     from carapost.sample.render import leds_of, render_view
     from carapost.sample.scene import build_scene, frame_geometry, true_cameras
 
-    sc = build_scene(markers=35, frames=300, seed=1, white=True)
-    g, cams = frame_geometry(sc, 92), true_cameras(sc, 92)
-    img, truth = render_view(sc, g, cams[0], 0, 92, leds=leds_of(cams))
-    u, v = truth.centre[list(sc.markers.labels).index("Lip_Lower_L")]
+    sc = build_scene(markers=markers, frames=frames, seed=seed, white=True)
+    g, cams = frame_geometry(sc, frame), true_cameras(sc, frame)
+    img, truth = render_view(sc, g, cams[camera], camera, frame, leds=leds_of(cams))
+    u, v = truth.centre[list(sc.markers.labels).index(label)]
 
     def error():
         rec = detect(img, white=True)
         return float(np.hypot(rec["x"] - u, rec["y"] - v).min())
 
-    assert error() < 0.5
-    monkeypatch.setattr(detector, "GROWN", 1.8)
-    assert error() > 1.5
+    return error
 
 
 def test_the_edge_fits_median_is_numpys():
@@ -468,18 +475,8 @@ def test_a_saturated_white_dot_on_a_highlight_is_found_from_its_own_edge(monkeyp
     missed.  A grown fit that stage 2 rejects is not taken for such a blob: the candidate's own edge outlines the
     dot (docs/blobs.md, "Session 27")."""
     from carapost.core.blobs import detector
-    from carapost.sample.render import leds_of, render_view
-    from carapost.sample.scene import build_scene, frame_geometry, true_cameras
 
-    sc = build_scene(markers=100, frames=81, seed=2, white=True)
-    g, cams = frame_geometry(sc, 80), true_cameras(sc, 80)
-    img, truth = render_view(sc, g, cams[1], 1, 80, leds=leds_of(cams))
-    u, v = truth.centre[list(sc.markers.labels).index("Nose_Tip")]
-
-    def error():
-        rec = detect(img, white=True)
-        return float(np.hypot(rec["x"] - u, rec["y"] - v).min())
-
+    error = _white_dot_error(markers=100, frames=81, seed=2, frame=80, camera=1, label="Nose_Tip")
     assert error() < 0.5
     monkeypatch.setattr(detector, "HELD_BELOW", 0.0)
     assert error() > 1.5
