@@ -13,6 +13,7 @@ import pytest
 from carapost.core.tracking import elastic, track
 from carapost.core.tracking.evaluate import identify
 from carapost.core.tracking.synthetic_take import initialise, make_take
+from support import remove_marker_detection
 
 QUIET = dict(jaw_mm=0.0, blinks=0, occlusion_rate=0.0, hidden_markers=0, slips=0)
 #: Cameras 0-1 and 2-3 of the synthetic rig are pairs ~10 degrees apart (one side of the face each).
@@ -99,8 +100,6 @@ def biased_pair(sc, m, frames, depth_mm, drop):
     Both blobs move ~1 px, consistently (a point that far off in depth projects there), so their
     residuals stay small: only a camera of the other side, or the neighbours, can tell.
     """
-    from support import remove_marker_detection
-
     for f in frames:
         X = sc.face[f, m]
         u = sum((X - sc.cameras[f][s].position) / np.linalg.norm(X - sc.cameras[f][s].position) for s in PAIR)
@@ -356,8 +355,6 @@ def test_a_biased_close_pair_alone_on_the_face_is_lost_not_placed_millimetres_of
     """The rule above through the tracker: for four frames only marker 5 is detected, by the close pair, as if
     4 mm deep.  It was tracked 3.7-4.5 mm off there; now it is not measured on those frames and is measured
     again, within 0.1 mm, once the other markers are back."""
-    from support import remove_marker_detection
-
     sc = copy.deepcopy(quiet)
     m, frames = 5, range(10, 14)
     for f in frames:
@@ -369,3 +366,18 @@ def test_a_biased_close_pair_alone_on_the_face_is_lost_not_placed_millimetres_of
     err = tracked_errors(sc, m, range(8, 16))
     assert np.isnan(err[2:6]).all(), err
     assert np.nanmax(err) < 0.1, err
+
+
+def test_one_point_tracked_alone_on_a_close_pair_is_measured(quiet):
+    """The rule above needs neighbours that could predict the point: a point tracked on its own (Track with only
+    it selected) has none, and is measured on the close pair's views as before."""
+    sc = copy.deepcopy(quiet)
+    m, frames = 5, range(10, 14)
+    for f in frames:
+        for s in OTHER:
+            remove_marker_detection(sc, f, s, m)
+    pid = next(pid for pid, mm in identify(sc, 0).items() if mm == m)
+    track(sc.project, 0, 1, point_ids=[pid]).do(sc.project)
+    p = sc.project.points[pid]
+    err = np.array([np.linalg.norm(p.pos[f] - sc.face[f, m]) for f in frames])
+    assert np.all(err < 1.0), err                              # measured (a close pair: depth to ~0.5 mm)

@@ -26,7 +26,7 @@ from . import features as fe
 from .candidate_kernel import LEVEL_SCALE, apart, engulfing, greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .measure_kernel import fit_round, next_round
-from .edges import MERGED, TRUST, TRUST_TEXTURED, edge_ellipses, refine_centres
+from .edges import TRUST, TRUST_TEXTURED, edge_ellipses, refine_centres
 from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
 
@@ -253,7 +253,7 @@ def _dedupe(x, y, minor, score) -> np.ndarray:
 
 
 #: A fit is suspected of having been drawn off its candidate's dot when it ended more than DRIFT
-#: candidate radii (and 1.5 px) away, or measured more than ``edges.MERGED`` times the candidate's radius.
+#: candidate radii (and 1.5 px) away, or measured more than :data:`GROWN` times the candidate's radius.
 DRIFT = 1.0
 #: Logit subtracted from the stage-2 score of an ellipse found from its candidate's edge.  On sample
 #: frames of seeds 6-8 (not the benchmark's), stage 2 scored 43 such ellipses on markers 0.62-1.0
