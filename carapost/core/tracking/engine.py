@@ -1110,7 +1110,8 @@ class FrameTracker(NewPoints):
         Each average's variance (mm², inf where not averaged) goes to ``self._post_new``: the next frame's
         prediction carries it (:data:`CARRIED_Q`).
 
-        A narrow point that no neighbour predicts is not measured (its row of ``X`` is NaN).
+        A narrow point that no neighbour predicts, though it has neighbours (they are all lost), is not
+        measured (its row of ``X`` is NaN).
 
         Every measured point's position is first averaged with the prediction, each weighted by
         its certainty (:func:`fuse_depth`); the bound applies to the average.  A narrow point more
