@@ -1160,8 +1160,11 @@ class FrameTracker(NewPoints):
         # (a chin dot with the jaw open, every neighbour lost, met 4.6 mm deep on cameras 0 and 1 at 4.3 mm a px;
         # its own motion was 3.4 mm off too).  Where the neighbours come back, so does the point.  A point
         # tracked with too few others to have neighbours (one or two selected points) has nothing to wait for.
-        X[narrow & ~finite_rows(pred) & ((self.nb >= 0).sum(axis=1) >= elastic.MIN_NEIGHBOURS)] = np.nan
-        rows = np.flatnonzero(narrow & finite_rows(pred))
+        predicted = finite_rows(pred)
+        unbounded = narrow & ~predicted
+        if np.any(unbounded):
+            X[unbounded & ((self.nb >= 0).sum(axis=1) >= elastic.MIN_NEIGHBOURS)] = np.nan
+        rows = np.flatnonzero(narrow & predicted)
         if len(rows) == 0:
             return X, pred, clamped
         along = np.einsum("ni,ni->n", X[rows] - pred[rows], u[rows])
