@@ -9,14 +9,24 @@ candidate is labelled positive when it lies near a visible marker's centre,
 negative when it is away from every marker, and left out when ambiguous.
 Stage 1 (candidate features) is trained first; then every candidate it lets
 through is fitted and stage 2 (fit features plus the stage-1 logit) is trained
-on the fits, positive when the fitted centre is within 1 px of the truth.  Each
+on the fits, positive when the fitted centre is within 1 px of the truth.  With
+``--edge-scenes N`` a third network, the edge stage, is trained the same way on
+the ellipses found from a candidate's own edge alone (more scenes of them), from
+stage 2's features and logit and the edge's own features (how it scatters, how
+many rays found it, how strong it is); ``--edge-fpr`` sets how many false ones
+it may add against the rule it stands beside.  Each
 stage is a one-hidden-layer tanh network fitted with full-batch Adam on the
 class-balanced logistic loss.  Everything is seeded: the same command gives
 the same weights.
 
 Usage::
 
-    python tools/train_blob_model.py [--images 160] [--scenes 3] [--jaw-scenes 0] [--grazing 0] [--colour both] [--seed 5] [--out resources]
+    python tools/train_blob_model.py [--images 160] [--scenes 3] [--jaw-scenes 0] [--grazing 0] [--edge-scenes 0]
+                                     [--edge-fpr 0.5] [--edge-only] [--colour both] [--seed 5] [--out resources]
+
+The shipped edge stages (session 28) were made, over the shipped stages 1 and 2, with::
+
+    python tools/train_blob_model.py --images 200 --edge-scenes 30 --edge-fpr 0.5 --edge-only --seed 5
 """
 from __future__ import annotations
 
@@ -29,7 +39,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from carapost.core.blobs.detector import as_grey_u8, find_candidates, fit_stage  # noqa: E402
+from carapost.core.blobs.detector import (RESCUE_LOGIT, _refine_edge_ellipses, as_grey_u8, find_candidates,  # noqa: E402
+                                         fit_stage)
 from carapost.core.blobs.model import MLP, BlobModel  # noqa: E402
 from carapost.core.blobs.synth import render, render_grazing, sample_frames  # noqa: E402
 
@@ -153,6 +164,56 @@ def stage2_examples(data, white: bool, model: BlobModel):
     return np.concatenate(F), np.concatenate(Y).astype(np.float32)
 
 
+def edge_examples(data, white: bool, model: BlobModel):
+    """Stage-2 features, edge features and labels of the ellipses found from a candidate's own edge
+    (``from_edge``).
+
+    Labelled as stage 2's examples; returns the stage-2 features, the edge features
+    (:data:`~carapost.core.blobs.model.EDGE_FEATURE_NAMES`), the labels and which examples are usable
+    (the others lie on a marker off its centre or near a hidden one).
+    """
+    F, Q, Y, U = [], [], [], []
+    for s in data:
+        c, bright = find_candidates(as_grey_u8(s.image), white, 2.0, 60.0)
+        if len(c.x) == 0:
+            continue
+        fit = fit_stage(c, bright, model)
+        if fit.from_edge is None:
+            continue
+        sel = np.flatnonzero(fit.from_edge & fit.ok)
+        # Labelled where detect() puts them: step 5 along their own normals may move them up to 1 px.
+        x, y = _refine_edge_ellipses(bright, fit.x[sel], fit.y[sel], fit.major[sel], fit.minor[sel], fit.angle[sel],
+                                     not white)
+        pos, use = _labels(np.stack([x, y], 1), s, np.full(len(sel), 1.0))
+        F.append(fit.feats[sel])
+        Q.append(fit.edge_feats[sel])
+        Y.append(pos)
+        U.append(use)
+    if not F:
+        z = np.zeros((0, 0), np.float32)
+        return z, z, np.zeros(0, np.float32), np.zeros(0, bool)
+    return np.concatenate(F), np.concatenate(Q), np.concatenate(Y).astype(np.float32), np.concatenate(U)
+
+
+def train_edge(model: BlobModel, F: np.ndarray, Q: np.ndarray, Y: np.ndarray, seed: int, fpr: float = 0.5) -> MLP:
+    """The edge stage: a network over stage 2's features and logit and the edge's features ``Q``, trained
+    on edge ellipses alone.
+
+    Its output bias is set so that the default threshold (0.4) passes ``fpr`` times the share of the
+    negatives that the rule before it passes (stage 2's logit less ``RESCUE_LOGIT``).  Detection takes
+    the larger of the two scores (:meth:`~carapost.core.blobs.model.BlobModel.score`): the edge stage adds
+    what the rule missed, it does not drop what the rule kept.
+    """
+    X = model.edge_features(F, Q)
+    mlp = train(X, Y, seed, hidden=8)
+    at = np.log(0.4 / 0.6)
+    neg = Y < 0.5
+    before = (model.stage2.logit(F[neg]) - RESCUE_LOGIT >= at).mean()
+    thr = np.quantile(mlp.logit(X[neg]), 1.0 - fpr * before)
+    mlp.b2 = float(mlp.b2 - thr + at)
+    return mlp
+
+
 def train(F: np.ndarray, Y: np.ndarray, seed: int, hidden: int = 16, iters: int = 3000) -> MLP:
     """Full-batch Adam on the class-balanced logistic loss of a one-hidden-layer network."""
     rng = np.random.default_rng(seed)
@@ -204,6 +265,20 @@ def calibrate(mlp: MLP, F: np.ndarray, Y: np.ndarray, recall: float = 0.99, at: 
     return mlp
 
 
+def _edge_stage(model: BlobModel, white: bool, a) -> MLP:
+    """Train the edge stage for ``model`` (``--edge-scenes``) and report it."""
+    data = images(white, a.images, a.seed) + sample_takes(white, a.edge_scenes, a.seed)
+    data += jaw_takes(white, a.edge_scenes, a.seed)
+    F, Q, Y, U = edge_examples(data, white, model)
+    edge = train_edge(model, F[U], Q[U], Y[U], a.seed + 2, a.edge_fpr)
+    pos, neg = (Y > 0.5) & U, (Y < 0.5) & U
+    before = model.stage2.logit(F) - RESCUE_LOGIT >= np.log(0.4 / 0.6)
+    after = before | (edge.predict(model.edge_features(F, Q)) >= 0.4)
+    print(f"edge stage: {int(U.sum())} edge ellipses ({int(pos.sum())} blobs) at 0.4: recall {before[pos].mean():.4f} -> "
+          f"{after[pos].mean():.4f}, false {before[neg].mean():.4f} -> {after[neg].mean():.4f}")
+    return edge
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--images", type=int, default=160, help="generated training images per colour")
@@ -212,6 +287,14 @@ def main(argv=None) -> int:
                     help="sample-take scenes per colour with the jaw open widest (4 cameras x 2 frames each)")
     ap.add_argument("--grazing", type=int, default=0,
                     help="generated images per colour of thin dots beside the face's outline, nostrils and mouth")
+    ap.add_argument("--edge-scenes", type=int, default=0,
+                    help="train the edge stage too, on the edge ellipses of the generated images and of this many "
+                         "sample-take and jaw-open scenes more per colour (0: no edge stage)")
+    ap.add_argument("--edge-fpr", type=float, default=0.5,
+                    help="the edge stage's false detections at the default threshold, as a share of those of the "
+                         "rule it stands beside (stage 2 less RESCUE_LOGIT)")
+    ap.add_argument("--edge-only", action="store_true",
+                    help="keep the stages 1 and 2 in --out and (re)train only the edge stage")
     ap.add_argument("--colour", choices=("both", "black", "white"), default="both",
                     help="train one colour's weights only (the other's file is left as it is)")
     ap.add_argument("--seed", type=int, default=5)
@@ -220,6 +303,13 @@ def main(argv=None) -> int:
     for white in {"both": (False, True), "black": (False,), "white": (True,)}[a.colour]:
         t = time.time()
         name = "white" if white else "black"
+        path = Path(a.out) / f"blob_model_{name}.npz"
+        if a.edge_only:
+            model = BlobModel.load(path)
+            model.edge = _edge_stage(model, white, a)
+            model.save(path)
+            print(f"{name}: edge stage only; {time.time() - t:.0f} s -> {path}")
+            continue
         data = images(white, a.images, a.seed) + sample_takes(white, a.scenes, a.seed)
         data += jaw_takes(white, a.jaw_scenes, a.seed)
         grazing = grazing_images(white, a.grazing, a.seed)
@@ -234,7 +324,8 @@ def main(argv=None) -> int:
                                  F2, Y2)
         F2, Y2 = np.concatenate([F2, Fg]), np.concatenate([Y2, Yg])
         p1, p2 = model.stage1.predict(F1), model.stage2.predict(F2)
-        path = Path(a.out) / f"blob_model_{name}.npz"
+        if a.edge_scenes:
+            model.edge = _edge_stage(model, white, a)
         model.save(path)
         print(f"{name}: stage 1 {len(Y1)} candidates ({int(Y1.sum())} blobs) recall {(p1[Y1 > 0.5] >= 0.05).mean():.4f} "
               f"at the gate; stage 2 {len(Y2)} fits ({int(Y2.sum())} blobs) recall {(p2[Y2 > 0.5] >= 0.4).mean():.4f}, "

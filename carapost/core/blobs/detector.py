@@ -303,8 +303,9 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
         drift &= among
     idx = np.flatnonzero(drift)
     rescued = np.zeros(len(x), bool)
+    quality = np.full((len(x), 4), np.nan)
     if len(idx) == 0:
-        return rescued
+        return rescued, quality
     sx, sy = cand.x[sel][idx], cand.y[sel][idx]
     # A fit that holds its candidate may be a larger blob the candidate is part of: its own clean
     # edge says so.  One that left its candidate behind says nothing about it.
@@ -313,11 +314,11 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
         held[weak[idx]] = 0.0
     # A dot measured with the hair it touches: that side of its own edge is spoilt too (its best arc).
     e = edge_ellipses(bright, sx, sy, r0[idx], (x[idx], y[idx], held, minor[idx], ang[idx]), grown[idx],
-                      flat=not cand.white)
+                      flat=not cand.white, quality=True)
     good = e[:, 5] > 0
     idx, e = idx[good], e[good]
     if len(idx) == 0:
-        return rescued
+        return rescued, quality
     m = len(idx)
     # One solve in a window about each edge ellipse (fit_candidates' round; its centre is not used).
     rr = np.clip(GROW * 0.5 * e[:, 2], 1.0, WINDOWS[-1] - BORDER)
@@ -328,7 +329,8 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     ok[idx] = ok_e
     extra[idx] = extra_e
     rescued[idx] = True
-    return rescued
+    quality[idx] = e[:, 6:10]
+    return rescued, quality
 
 
 #: A detection whose major axis is this many times another's, with that one's centre inside its
@@ -365,6 +367,8 @@ class Fitted:
     feats: np.ndarray     #: stage-2 features (:data:`~.model.FIT_FEATURE_NAMES`)
     start: tuple = ()     #: the candidates' ``(x, y, radius)`` (full resolution)
     from_edge: np.ndarray | None = None  #: the ellipse is the candidate's own edge (:func:`_rescue_drifted`)
+    #: (N, len(EDGE_FEATURE_NAMES)) how that edge looked (:func:`_edge_quality`; NaN for the other fits)
+    edge_feats: np.ndarray | None = None
 
 
 def _fit_features(cand: Candidates, sel, logit1, x, y, major, minor, extra, rescued) -> np.ndarray:
@@ -411,7 +415,7 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
         p0 = model.stage2.predict(_fit_features(cand, sel, logit1, x, y, major, minor, extra, np.zeros(len(sel))))
         among = ~(ok & (p0 >= RESCUE_ABOVE) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
         weak = p0 < HELD_BELOW
-    rescued = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among, weak)
+    rescued, quality = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among, weak)
     # The centre may wander to a neighbour: the candidate must stay inside the blob found.
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     ok &= moved <= np.maximum(np.maximum(0.5 * major, cand.radius[sel]), 2.0)
@@ -420,7 +424,7 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
     F = _fit_features(cand, sel, logit1, x, y, major, minor, extra, rescued)
     return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F,
-                  (cand.x[sel], cand.y[sel], cand.radius[sel]), rescued)
+                  (cand.x[sel], cand.y[sel], cand.radius[sel]), rescued, _edge_quality(quality, extra, cand.noise))
 
 
 #: A blob whose surround (step 3's ring of background) varies more than this many times the image's noise
@@ -431,6 +435,16 @@ TEXTURED = 1.5
 
 
 _BORDER, _CNR = FIT_FEATURE_NAMES.index("border_std"), FIT_FEATURE_NAMES.index("log_cnr")
+
+
+def _edge_quality(q: np.ndarray, extra: np.ndarray, noise: float) -> np.ndarray:
+    """The edge stage's own inputs (:data:`~.model.EDGE_FEATURE_NAMES`) from :func:`.edges.edge_ellipses`' quality
+    columns ``q`` and the fits' measurements ``extra``: the edge's scatter, the share of rays that found it,
+    its median gradient over the noise and over the blob's contrast, its weakest over its median."""
+    contrast = np.maximum(extra[:, 0], 1e-3)
+    med = np.maximum(q[:, 2], 1e-3)
+    return np.column_stack([np.clip(q[:, 0], 0, 5), q[:, 1], np.log(med / max(noise, 0.1)),
+                            np.clip(med / contrast, 0, 5), np.clip(q[:, 3] / med, 0, 1)]).astype(np.float32)
 
 
 def _trust(feats: np.ndarray) -> np.ndarray:
@@ -495,12 +509,9 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     cand, bright = find_candidates(img, white, min_major, max_major)
     fitted = fit_stage(cand, bright, model)
     if model.stage2 is not None:
-        prob = model.stage2.predict(fitted.feats)
-        # An ellipse from a candidate's own edge is a second guess: scored lower (RESCUE_LOGIT).
-        from_edge = fitted.from_edge
-        if from_edge is not None and from_edge.any():
-            q = np.clip(prob[from_edge], 1e-9, 1 - 1e-9)
-            prob[from_edge] = 1.0 / (1.0 + np.exp(RESCUE_LOGIT - np.log(q / (1.0 - q))))
+        # An ellipse from a candidate's own edge is a second guess: stage 2 less RESCUE_LOGIT, or the edge
+        # stage's score where that is higher (:meth:`~.model.BlobModel.score`).
+        prob = model.score(fitted.feats, fitted.from_edge, RESCUE_LOGIT, fitted.edge_feats)
     else:
         prob = fitted.prob1
     ok = fitted.ok & (prob >= max(float(threshold), 1e-6))

@@ -795,6 +795,14 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
         dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, box, arcs[i] > 0.0, 2 if flat else 0)
         if not clean:
             continue
+        # How the edge looks (the edge stage's inputs): its scatter, the share of rays that found it, and the
+        # median and weakest gradient peaks of those rays.
+        med = _median_of_used(buf[2], buf[6], buf[7])
+        low = np.inf
+        for k in range(RAYS):
+            if buf[6][k] > 0.0 and buf[2][k] < low:
+                low = buf[2][k]
+        q0, q1, q2, q3 = spread, n / RAYS, med, low
         # The conic again on the points the last round kept, for its axes as well as its centre.
         x0, y0, ok, z = _conic_solve(buf[3], buf[4], buf[6], r0, buf[5])
         a, b, th = _conic_axes(z, x0, y0)
@@ -810,9 +818,11 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
                 continue
         out[i, 0], out[i, 1] = sx[i] + x0 * r0, sy[i] + y0 * r0
         out[i, 2], out[i, 3], out[i, 4], out[i, 5] = 2.0 * a * r0, 2.0 * b * r0, math.degrees(th), 1.0
+        if out.shape[1] >= 10:
+            out[i, 6], out[i, 7], out[i, 8], out[i, 9] = q0, q1, q2, q3
 
 
-def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=False):
+def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=False, quality=False):
     """Ellipses of dots found from their painted edge alone, around candidate centres.
 
     For a candidate whose intensity measurement was drawn off to a larger dark
@@ -838,10 +848,14 @@ def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=F
     flat : bool
         Black paint: the flat-paint test of step 5.2, about the ellipse first
         fitted to each candidate's edge.
+    quality : bool
+        Also return how the edge looked (four more columns: its points' robust scatter about
+        the conic, px; the share of the rays that found it; the median and the weakest
+        gradient peak of those rays, grey levels a px).  Zeros where ``clean`` is 0.
 
     Returns
     -------
-    numpy.ndarray, shape (N, 6)
+    numpy.ndarray, shape (N, 6) or (N, 10)
         ``x, y, major, minor, angle, clean`` per candidate (full axes, px; angle
         of the major axis, degrees); ``clean`` is 1 where the edge made a clean
         ellipse within a candidate radius (and 1.5 px) of the candidate and no
@@ -853,7 +867,7 @@ def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=F
         fits = (np.zeros(n),) * 5
     args += [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in fits]
     args.append(np.zeros(n) if arcs is None else np.ascontiguousarray(np.asarray(arcs, float)).reshape(-1))
-    out = np.zeros((n, 6))
+    out = np.zeros((n, 10 if quality else 6))
     if len(out):
         _from_candidates(np.ascontiguousarray(bright), *args, out, bool(flat))
     return out

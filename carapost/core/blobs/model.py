@@ -1,4 +1,4 @@
-"""The blob classifier: two tiny multilayer perceptrons.
+"""The blob classifier: tiny multilayer perceptrons, two stages and an edge stage.
 
 Stage 1 scores every candidate from its pyramid-level neighbourhood
 (:data:`~.features.FEATURE_NAMES`), cheaply, so that only plausible blobs
@@ -10,7 +10,11 @@ light: black paint takes ~90 % of it, a mole or a pore a third — and the unifo
 the blob's core — a pupil has glints in it — and whether the ellipse came from the candidate's own
 edge, its measurement having been drawn off it) together with the stage-1 logit.  The
 stage-2 probability is the detection's score and what the Black/White
-Threshold applies to.
+Threshold applies to — except for an ellipse found from its candidate's own edge (its
+intensity measurement having been drawn off it), which the **edge stage**, a third network
+trained on such ellipses alone, scores from the same features, stage 2's logit and how the edge
+looked (:data:`EDGE_FEATURE_NAMES`: how far its points scatter about the ellipse, how many of the
+rays found it, how strong it is against the noise and the blob's contrast, and its weakest ray).
 
 Weights live in ``resources/blob_model_{black,white}.npz`` and are produced by
 ``tools/train_blob_model.py`` (deterministic seed).  Evaluation is a few small
@@ -31,6 +35,9 @@ RESOURCE_DIR = Path(__file__).resolve().parents[3] / "resources"
 #: Features of a measured blob seen by stage 2 (after the stage-1 logit; see :mod:`.centre`).
 FIT_FEATURE_NAMES = ("s1_logit", "log_cnr", "log_major", "axis_ratio", "line_rms", "log_sharpness",
                      "border_std", "slope", "fill", "edge_share", "moved", "depth", "core_std", "from_edge")
+#: How the edge of an ellipse found from its candidate's edge looked (the edge stage's own inputs,
+#: :func:`.detector._edge_quality`).
+EDGE_FEATURE_NAMES = ("edge_scatter", "edge_rays", "log_edge_noise", "edge_contrast", "edge_weakest")
 #: Stage-1 probability below which a candidate is not measured at all.
 STAGE1_GATE = 0.15
 
@@ -69,17 +76,23 @@ class MLP:
 
 @dataclass
 class BlobModel:
-    """The two stages for one blob colour."""
+    """The stages for one blob colour."""
 
     stage1: MLP
     stage2: MLP | None = None
+    #: Scores the ellipses found from a candidate's own edge (``from_edge``) beside stage 2, from stage 2's
+    #: features and logit and the edge's own features (:meth:`edge_features`, :meth:`score`); None: stage 2
+    #: less :data:`.detector.RESCUE_LOGIT` alone.
+    edge: MLP | None = None
 
     def save(self, path) -> None:
         arrays = self.stage1.arrays("s1_")
         if self.stage2 is not None:
             arrays.update(self.stage2.arrays("s2_"))
+        if self.edge is not None:
+            arrays.update(self.edge.arrays("se_"))
         np.savez(path, feature_names=np.array(FEATURE_NAMES), fit_feature_names=np.array(FIT_FEATURE_NAMES),
-                 **arrays)
+                 edge_feature_names=np.array(EDGE_FEATURE_NAMES), **arrays)
 
     @classmethod
     def load(cls, path) -> "BlobModel":
@@ -87,12 +100,40 @@ class BlobModel:
             z = np.load(path)
             names = tuple(str(n) for n in z["feature_names"])
             fit_names = tuple(str(n) for n in z["fit_feature_names"]) if "fit_feature_names" in z else ()
+            edge_names = tuple(str(n) for n in z["edge_feature_names"]) if "edge_feature_names" in z else ()
         except (OSError, ValueError, KeyError) as e:
             raise CaraError(f"{path}: cannot read blob model ({e})") from None
-        if names != FEATURE_NAMES or (fit_names and fit_names != FIT_FEATURE_NAMES):
+        if names != FEATURE_NAMES or (fit_names and fit_names != FIT_FEATURE_NAMES) or (
+                "se_w1" in z and edge_names != EDGE_FEATURE_NAMES):
             raise CaraError(f"{path}: blob model was trained on other features; run tools/train_blob_model.py")
         s2 = MLP.from_arrays(z, "s2_") if "s2_w1" in z else None
-        return cls(MLP.from_arrays(z, "s1_"), s2)
+        se = MLP.from_arrays(z, "se_") if "se_w1" in z else None
+        return cls(MLP.from_arrays(z, "s1_"), s2, se)
+
+    def edge_features(self, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
+        """The edge stage's inputs: stage 2's features ``F``, stage 2's logit of them and how the edge
+        looked (``Q``, :data:`EDGE_FEATURE_NAMES`)."""
+        return np.concatenate([F, self.stage2.logit(F)[:, None].astype(np.float32), np.asarray(Q, np.float32)],
+                              axis=1)
+
+    def score(self, F: np.ndarray, from_edge: np.ndarray | None, rescue_logit: float,
+              Q: np.ndarray | None = None) -> np.ndarray:
+        """The detections' scores: stage 2's probability, and for ellipses found from an edge the larger of
+        stage 2's logit less ``rescue_logit`` and the edge stage's (from ``Q``, the rows' edge features;
+        without it, or without an edge stage, the rule alone).
+
+        The edge stage only adds: an edge ellipse stage 2 is sure of keeps that score (a white nose tip's
+        dot on its soft highlight looks to the edge stage like a specular highlight).
+        """
+        prob = self.stage2.predict(F)
+        if from_edge is None or not from_edge.any():
+            return prob
+        q = np.clip(prob[from_edge], 1e-9, 1 - 1e-9)
+        rule = 1.0 / (1.0 + np.exp(rescue_logit - np.log(q / (1.0 - q))))
+        if self.edge is not None and Q is not None:
+            rule = np.maximum(rule, self.edge.predict(self.edge_features(F[from_edge], Q[from_edge])))
+        prob[from_edge] = rule
+        return prob
 
 
 @functools.lru_cache(maxsize=4)
