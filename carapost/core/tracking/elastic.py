@@ -168,7 +168,7 @@ def predict(X: np.ndarray, available: np.ndarray, nb: np.ndarray, off: np.ndarra
         _rigid_fit(X, available, nb, off, weight, np.flatnonzero(rigid), pred)
         return pred, count
     if rotate is not None and np.any(rotate):
-        off = turned_offsets(X, available, nb, off, weight, np.flatnonzero(rotate))
+        off = turned_offsets(X, available, nb, off, np.flatnonzero(rotate))
     if weight is None:
         pred, _use, _cand, count = _votes_median(X, available, nb, off, min_neighbours)
         return pred, count
@@ -303,15 +303,18 @@ def _rigid_fit(X, available, nb, off, weight, rows, pred) -> None:
     pred[rows[enough]] = fit[enough, :, 3]
 
 
-def turned_offsets(X, available, nb, off, weight, rows) -> np.ndarray:
+def turned_offsets(X, available, nb, off, rows) -> np.ndarray:
     """``off`` (n, K, 3) with each of ``rows`` turned by its neighbourhood's rotation since it was refreshed.
 
     A vote ``X[j] + off`` translates the point with its neighbour; where the face turns (the jaw opening)
     the point also swings about it, by the offset's length times the angle: 0.1-0.2 mm a frame at 10 mm.
-    The rotation is :func:`_neighbourhood_motion`'s; rows with fewer than four usable neighbours are left
-    as they are.
+    The rotation is :func:`_neighbourhood_motion`'s, unweighted; rows with fewer than four usable neighbours
+    are left as they are.
     """
-    fit, enough = _neighbourhood_motion(X, available, nb, off, weight, rows)
+    # Every usable neighbour has the same say in the rotation: where one outweighs the rest (it moved with
+    # the point), the weighted fit rests on one point and its rotation is a guess (docs/tracking.md,
+    # "Session 28": a cheek dot's neighbourhood turned 11-14 degrees in four frames).
+    fit, enough = _neighbourhood_motion(X, available, nb, off, None, rows)
     enough &= np.isfinite(fit[:, 0, 0])
     out = np.array(off, dtype=float, copy=True)
     r = rows[enough]
