@@ -17,7 +17,7 @@ import numpy as np
 from carapost.core.points import SRC_DETECTION, ST_NONE, ST_RECONSTRUCTED
 from carapost.core.tracking import track, warm_up
 from carapost.core.tracking.evaluate import evaluate
-from carapost.core.tracking.geometry import RigState, reprojection, triangulate
+from carapost.core.tracking.geometry import RigState, triangulate
 from carapost.core.tracking.synthetic_take import initialise, make_take
 
 TARGET_FPS = 120.0

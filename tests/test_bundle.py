@@ -36,7 +36,6 @@ def test_bundle_recovers_cameras_and_points_with_outlier():
 def _attach_truth(sc):
     pr = sc.project
     F = pr.frame_count
-    pts = []
     for m in range(sc.face.shape[1]):
         p = pr.new_point(point_id=m)
         for s in range(4):

@@ -8,7 +8,7 @@ import pytest
 
 from carapost.core.brim import Brim
 from carapost.core.document import Document
-from carapost.core.edits import ClearPointRange, RenamePoint
+from carapost.core.edits import ClearPointRange
 from carapost.core.errors import CaraError
 from carapost.core.project import MediaRef, Stick
 from carapost.io import cara

@@ -6,7 +6,7 @@ import time
 import numpy as np
 
 from carapost.core import continuity as C
-from carapost.core.points import (SRC_DETECTION, SRC_KEYFRAME, SRC_NONE, SRC_PATCH, SRC_TARGET, ST_INTERPOLATED,
+from carapost.core.points import (SRC_DETECTION, SRC_KEYFRAME, SRC_PATCH, SRC_TARGET, ST_INTERPOLATED,
                                   ST_NONE, ST_RECONSTRUCTED, ST_SINGLE)
 from carapost.core.project import Project
 

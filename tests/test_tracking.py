@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from carapost.core.commands import UndoStack
-from carapost.core.detections import make_detections
 from carapost.core.points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_SINGLE
 from carapost.core.progress import Progress
 from carapost.core.tracking import track, track_backwards_sequence, track_forwards_sequence, track_single_frame

@@ -4,7 +4,6 @@ import copy
 import warnings
 
 import numpy as np
-import pytest
 
 from carapost.core.tracking import elastic, engine, track
 from carapost.core.tracking.evaluate import evaluate
