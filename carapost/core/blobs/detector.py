@@ -27,7 +27,7 @@ from .candidate_kernel import LEVEL_SCALE, apart, engulfing, greedy_nms, profile
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .measure_kernel import fit_round, next_round
 from .edges import TRUST, TRUST_TEXTURED, edge_ellipses, refine_centres
-from .model import FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
+from .model import EDGE_FEATURE_NAMES, FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
 
 @dataclass
@@ -287,7 +287,8 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     window about it (one solve, whose centre is not used).  Only fits in ``among``
     (all by default) are looked at.  A fit in ``weak`` (stage 2 scores it under
     :data:`HELD_BELOW`) is not taken for a larger blob its candidate is part of,
-    however clean its own edge.  Returns which fits were replaced.
+    however clean its own edge.  Returns which fits were replaced and, for those, the edge stage's
+    features (:func:`_edge_quality`; NaN for the others).
     """
     r0 = cand.radius[sel]
     grown = 0.5 * major > GROWN * r0
@@ -303,7 +304,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
         drift &= among
     idx = np.flatnonzero(drift)
     rescued = np.zeros(len(x), bool)
-    quality = np.full((len(x), 4), np.nan)
+    quality = np.full((len(x), len(EDGE_FEATURE_NAMES)), np.nan, np.float32)
     if len(idx) == 0:
         return rescued, quality
     sx, sy = cand.x[sel][idx], cand.y[sel][idx]
@@ -329,7 +330,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
     ok[idx] = ok_e
     extra[idx] = extra_e
     rescued[idx] = True
-    quality[idx] = e[:, 6:10]
+    quality[idx] = _edge_quality(e[:, 6:10], extra_e, cand.noise)
     return rescued, quality
 
 
@@ -424,7 +425,7 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
     F = _fit_features(cand, sel, logit1, x, y, major, minor, extra, rescued)
     return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F,
-                  (cand.x[sel], cand.y[sel], cand.radius[sel]), rescued, _edge_quality(quality, extra, cand.noise))
+                  (cand.x[sel], cand.y[sel], cand.radius[sel]), rescued, quality)
 
 
 #: A blob whose surround (step 3's ring of background) varies more than this many times the image's noise

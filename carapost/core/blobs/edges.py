@@ -795,14 +795,16 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
         dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, box, arcs[i] > 0.0, 2 if flat else 0)
         if not clean:
             continue
-        # How the edge looks (the edge stage's inputs): its scatter, the share of rays that found it, and the
-        # median and weakest gradient peaks of those rays.
-        med = _median_of_used(buf[2], buf[6], buf[7])
-        low = np.inf
-        for k in range(RAYS):
-            if buf[6][k] > 0.0 and buf[2][k] < low:
-                low = buf[2][k]
-        q0, q1, q2, q3 = spread, n / RAYS, med, low
+        # How the edge looks (the edge stage's inputs), read before the check below reuses the buffers: its
+        # scatter, the share of rays that found it, and the median and weakest gradient peaks of those rays.
+        quality = out.shape[1] >= 10
+        med = low = 0.0
+        if quality:
+            med = _median_of_used(buf[2], buf[6], buf[7])
+            low = np.inf
+            for k in range(RAYS):
+                if buf[6][k] > 0.0 and buf[2][k] < low:
+                    low = buf[2][k]
         # The conic again on the points the last round kept, for its axes as well as its centre.
         x0, y0, ok, z = _conic_solve(buf[3], buf[4], buf[6], r0, buf[5])
         a, b, th = _conic_axes(z, x0, y0)
@@ -818,8 +820,8 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
                 continue
         out[i, 0], out[i, 1] = sx[i] + x0 * r0, sy[i] + y0 * r0
         out[i, 2], out[i, 3], out[i, 4], out[i, 5] = 2.0 * a * r0, 2.0 * b * r0, math.degrees(th), 1.0
-        if out.shape[1] >= 10:
-            out[i, 6], out[i, 7], out[i, 8], out[i, 9] = q0, q1, q2, q3
+        if quality:
+            out[i, 6], out[i, 7], out[i, 8], out[i, 9] = spread, n / RAYS, med, low
 
 
 def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=False, quality=False):
