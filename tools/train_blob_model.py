@@ -195,6 +195,16 @@ def edge_examples(data, white: bool, model: BlobModel):
     return np.concatenate(F), np.concatenate(Q), np.concatenate(Y).astype(np.float32), np.concatenate(U)
 
 
+#: The detector's default threshold (the guide's Black/White Threshold), as a logit.
+AT = np.log(0.4 / 0.6)
+
+
+def rule_keeps(model: BlobModel, F: np.ndarray) -> np.ndarray:
+    """Which edge ellipses of stage-2 features ``F`` the rule keeps at the default threshold: stage 2's logit
+    less ``RESCUE_LOGIT`` (what detection scores them by without an edge stage)."""
+    return model.stage2.logit(F) - RESCUE_LOGIT >= AT
+
+
 def train_edge(model: BlobModel, F: np.ndarray, Q: np.ndarray, Y: np.ndarray, seed: int, fpr: float = 0.5) -> MLP:
     """The edge stage: a network over stage 2's features and logit and the edge's features ``Q``, trained
     on edge ellipses alone.
@@ -206,11 +216,10 @@ def train_edge(model: BlobModel, F: np.ndarray, Q: np.ndarray, Y: np.ndarray, se
     """
     X = model.edge_features(F, Q)
     mlp = train(X, Y, seed, hidden=8)
-    at = np.log(0.4 / 0.6)
     neg = Y < 0.5
-    before = (model.stage2.logit(F[neg]) - RESCUE_LOGIT >= at).mean()
+    before = rule_keeps(model, F[neg]).mean()
     thr = np.quantile(mlp.logit(X[neg]), 1.0 - fpr * before)
-    mlp.b2 = float(mlp.b2 - thr + at)
+    mlp.b2 = float(mlp.b2 - thr + AT)
     return mlp
 
 
@@ -272,7 +281,7 @@ def _edge_stage(model: BlobModel, white: bool, a) -> MLP:
     F, Q, Y, U = edge_examples(data, white, model)
     edge = train_edge(model, F[U], Q[U], Y[U], a.seed + 2, a.edge_fpr)
     pos, neg = (Y > 0.5) & U, (Y < 0.5) & U
-    before = model.stage2.logit(F) - RESCUE_LOGIT >= np.log(0.4 / 0.6)
+    before = rule_keeps(model, F)
     after = before | (edge.predict(model.edge_features(F, Q)) >= 0.4)
     print(f"edge stage: {int(U.sum())} edge ellipses ({int(pos.sum())} blobs) at 0.4: recall {before[pos].mean():.4f} -> "
           f"{after[pos].mean():.4f}, false {before[neg].mean():.4f} -> {after[neg].mean():.4f}")

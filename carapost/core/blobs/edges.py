@@ -789,6 +789,7 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
     for i in range(len(sx)):
         rmax = max(rmax, sr[i], fmaj[i] / 2.0, fmin[i] / 2.0)
     buf, box = _scratch(rmax)
+    quality = out.shape[1] >= 10        # the caller asked for how each edge looked (edge_ellipses)
     for i in range(len(sx)):
         r0 = max(sr[i], 1.0)
         out[i, :] = 0.0
@@ -797,7 +798,6 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
             continue
         # How the edge looks (the edge stage's inputs), read before the check below reuses the buffers: its
         # scatter, the share of rays that found it, and the median and weakest gradient peaks of those rays.
-        quality = out.shape[1] >= 10
         med = low = 0.0
         if quality:
             med = _median_of_used(buf[2], buf[6], buf[7])
