@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from carapost.core.gapfill import fill_gaps, find_gaps, project_to_ray
-from carapost.core.points import SRC_DETECTION, ST_INTERPOLATED, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
+from carapost.core.points import (SRC_DETECTION, SRC_NONE, SRC_PATCH, SRC_TARGET, ST_INTERPOLATED, ST_NONE,
+                                  ST_RECONSTRUCTED, ST_SINGLE)
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 FACIAL = SHARED / "c3d" / "c3dorg_sample29_Facial-Sing.c3d"
@@ -104,6 +105,47 @@ def test_single_sensor_ray():
     np.testing.assert_allclose(project_to_ray(x, org[50:60, 3], dirn[50:60, 3]), x, atol=1e-9)
 
 
+def test_weak_samples_beside_a_gap_are_kept_but_do_not_predict_it():
+    """A lagging sample next to a gap is carried across the whole gap unless it is marked weak."""
+    truth = rigid_take()
+    cut = truth.copy()
+    cut[40:60, 2] = np.nan
+    cut[39, 2] += [1.5, -1.0, 0.5]                # a patch track lagging as the point was lost
+    weak = np.zeros(len(truth), bool)
+    weak[39] = True
+    plain, _ = fill_gaps(cut)
+    filled, mask = fill_gaps(cut, weak={2: weak})
+    assert np.abs(plain[40:60, 2] - truth[40:60, 2]).max() > 0.3
+    np.testing.assert_allclose(filled[40:60, 2], truth[40:60, 2], atol=1e-6)
+    np.testing.assert_array_equal(filled[39, 2], cut[39, 2])      # kept as measured, not written over
+    assert mask[40:60, 2].all() and mask.sum() == 20
+    # Weak samples that border no gap change nothing: with no gap, nor as another gap's context.
+    again, mask = fill_gaps(truth, weak={2: weak})
+    assert mask.sum() == 0 and np.array_equal(again, truth)
+    far = np.zeros(len(truth), bool)
+    far[[10, 120]] = True
+    cut[39, 2] = truth[39, 2]
+    np.testing.assert_array_equal(fill_gaps(cut, weak={2: far})[0], fill_gaps(cut)[0])
+
+
+def test_which_samples_are_weak():
+    from carapost.core.gapfill_ops import weak_samples
+    from carapost.core.points import Point
+
+    p = Point(0, 6, 3)
+    p.status[:] = [ST_RECONSTRUCTED, ST_RECONSTRUCTED, ST_RECONSTRUCTED, ST_SINGLE, ST_INTERPOLATED,
+                   ST_RECONSTRUCTED]
+    p.src[0] = [SRC_DETECTION, SRC_DETECTION, SRC_PATCH]       # two blobs: firm
+    p.src[1] = [SRC_DETECTION, SRC_PATCH, SRC_PATCH]           # depth from patches: weak
+    p.src[2] = [SRC_PATCH, SRC_NONE, SRC_PATCH]                # patches only: weak
+    p.src[3] = [SRC_DETECTION, SRC_NONE, SRC_NONE]             # single-sensor: weak
+    p.src[4] = SRC_NONE                                        # an earlier fill: not the tracker's
+    p.src[5] = SRC_NONE                                        # no 2D samples (a C3D's, or placed by hand)
+    assert weak_samples(p).tolist() == [False, True, True, True, False, False]
+    p.src[1] = [SRC_DETECTION, SRC_TARGET, SRC_NONE]           # Target Tracker samples count as blobs
+    assert not weak_samples(p)[1]
+
+
 # ---------------------------------------------------------------- project
 def _project(with_rig=False):
     from carapost.core.project import Project
@@ -163,6 +205,24 @@ def test_overwrite_flag():
     SetProperties({"gap_filling.overwrite_existing_filled_gaps": True}).do(pr)
     interpolate_gaps(pr).do(pr)
     np.testing.assert_allclose(p.pos[10:15], truth[10:15, 3], atol=1e-3)
+
+
+def test_interpolate_gaps_does_not_predict_from_patch_samples():
+    from carapost.core.gapfill_ops import interpolate_gaps
+    pr, truth = _project()
+    for p in pr.points.values():
+        p.src[:] = SRC_DETECTION
+    p = pr.points[2]
+    p.pos[20:30] = np.nan
+    p.status[20:30] = ST_NONE
+    p.src[20:30] = SRC_NONE
+    p.pos[19] += np.float32(2.0)                  # the frame before the gap seen by patches only, lagging
+    p.src[19] = SRC_PATCH
+    before = p.pos[19].copy()
+    interpolate_gaps(pr).do(pr)
+    assert (p.status[20:30] == ST_INTERPOLATED).all() and p.status[19] == ST_RECONSTRUCTED
+    np.testing.assert_array_equal(p.pos[19], before)
+    np.testing.assert_allclose(p.pos[20:30], truth[20:30, 2], atol=1e-3)
 
 
 def test_single_sensor_gap_filling_in_project():

@@ -171,7 +171,8 @@ def _local_track(pos, nb, w, p, frames, ref):
 
 def fill_gaps(positions: np.ndarray, *, forwards: bool = True, backwards: bool = True,
               max_gap: int | None = None, targets=None, rays=None, neighbours: int = 6,
-              context: int = 4, slope_gap: float = 20.0, validate: int = 3, gaps=None, progress=None) -> tuple[np.ndarray, np.ndarray]:
+              context: int = 4, slope_gap: float = 20.0, validate: int = 3, gaps=None, weak=None,
+              progress=None) -> tuple[np.ndarray, np.ndarray]:
     """Interpolate Gaps over a set of marker trajectories.
 
     Parameters
@@ -205,6 +206,12 @@ def fill_gaps(positions: np.ndarray, *, forwards: bool = True, backwards: bool =
     gaps : dict, optional
         ``{point: bool array (F,)}``: frames to (re)fill even though they hold a
         sample (Overwrite Existing Filled Gaps); those samples are not used.
+    weak : dict, optional
+        ``{point: bool array (F,)}``: samples kept as they are but not used to
+        predict a gap they border (in unbroken runs touching it): the gap is
+        predicted from the samples beyond them.  A tracker's sample without
+        blobs in two cameras behind it lags or strays as the point is being
+        lost, and the predictors carry that error across the whole gap.
     progress : Progress, optional
         Stepped once per target point.
 
@@ -232,19 +239,26 @@ def fill_gaps(positions: np.ndarray, *, forwards: bool = True, backwards: bool =
     for p in tgt:
         if not 0 <= p < n_points:
             raise CaraError(f"no point {p}")
-        if present[:, p].any():
-            for s, e in find_gaps(~present[:, p]):
-                if max_gap is not None and e - s + 1 > max_gap:
+        kept = present[:, p].copy()
+        if kept.any():
+            # A gap takes in the weak samples beside it, hidden from the predictors while it is filled
+            # (only its own: elsewhere they still serve as context and pseudo-gaps).
+            hide = ~kept | _beside_gaps(kept, weak[p]) if weak is not None and p in weak else ~kept
+            for s, e in find_gaps(hide):
+                todo = ~kept[s:e + 1]
+                if not todo.any() or (max_gap is not None and todo.sum() > max_gap):
                     continue
                 a = s - 1 if (s > 0 and forwards) else None
                 b = e + 1 if (e < n_frames - 1 and backwards) else None
                 if a is None and b is None:
                     continue
+                present[s:e + 1, p] = False
                 est = _combined(src_pos, present, p, s, e, a, b, neighbours, context, slope_gap, validate)
+                present[s:e + 1, p] = kept[s:e + 1]
                 if est is None:
                     continue
-                pos[s:e + 1, p] = est
-                mask[s:e + 1, p] = True
+                pos[s:e + 1, p][todo] = est[todo]
+                mask[s:e + 1, p] |= todo
         if progress is not None:
             progress.step()
     if rays is not None:
@@ -253,6 +267,16 @@ def fill_gaps(positions: np.ndarray, *, forwards: bool = True, backwards: bool =
         if has.any():
             pos[has] = project_to_ray(pos[has], org[has], dirn[has])
     return pos, mask
+
+
+def _beside_gaps(kept: np.ndarray, weak) -> np.ndarray:
+    """``(F,)`` bool: the ``weak`` samples of ``kept`` in unbroken runs that touch a missing frame."""
+    weak = np.asarray(weak, bool) & kept
+    out = np.zeros(len(kept), bool)
+    for s, e in find_gaps(weak):
+        if (s > 0 and not kept[s - 1]) or (e < len(kept) - 1 and not kept[e + 1]):
+            out[s:e + 1] = True
+    return out
 
 
 def _fill_one(pos, present, p, s, e, a, b, k, context, slope_gap):

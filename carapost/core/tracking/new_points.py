@@ -94,6 +94,7 @@ class NewPoints:
         self.patch_run = grow(self.patch_run, np.zeros(n, self.patch_run.dtype))
         self.tentative = grow(self.tentative, np.zeros(n, bool))
         self.tentative_views = grow(self.tentative_views, np.zeros((n, S), bool))
+        self.single_return = grow(self.single_return, np.zeros(n, bool))
         self._blob_w, self._el = grow(self._blob_w, np.ones((n, S))), grow(self._el, round_views((n, S)))
         self.pred_sd = grow(self.pred_sd, self._prediction_sd(elastic.spacing(everyone)[N:]))
         self.post_var = grow(self.post_var, np.full(n, np.inf))
