@@ -46,29 +46,59 @@ def _windows(white, image):
     return pad, ix, iy, r, centre.window_for(r), cand.noise
 
 
-def _compare(ref, new, centre_tol, extra_tol):
+def _compare(ref, new, centre_tol, extra_tol, only=None):
+    """``new`` (the kernel's) against ``ref`` (numpy float64) on the windows ``only`` (bool; all by default).
+
+    The kernel sums in float32 (relative errors ~1e-6 of each sum): geometry to ``centre_tol`` px, the
+    stage-2 measurements to ``extra_tol`` relative or absolute (``core_std`` of a saturated core is a
+    difference of two near-equal float32 sums: ~1e-4 where numpy's is 0).
+    """
     x, y, major, minor, angle, ok, extra = new
-    np.testing.assert_array_equal(ok, ref[5])
+    sel = np.ones(len(x), bool) if only is None else only
+    np.testing.assert_array_equal(ok[sel], ref[5][sel])
     for a, b in ((x, ref[0]), (y, ref[1]), (major, ref[2]), (minor, ref[3])):
-        np.testing.assert_allclose(a, b, rtol=0, atol=centre_tol)
-    dang = np.abs(angle - ref[4]) % 180.0
-    assert np.minimum(dang, 180.0 - dang).max(initial=0) < 100 * centre_tol
-    np.testing.assert_allclose(extra, ref[6], rtol=extra_tol, atol=extra_tol)
+        np.testing.assert_allclose(a[sel], b[sel], rtol=0, atol=centre_tol)
+    dang = np.abs(angle[sel] - ref[4][sel]) % 180.0
+    # The angle of a near-round blob is ill-defined: compared where the axes differ by a tenth.
+    round_ = (ref[2][sel] - ref[3][sel]) < 0.1 * ref[2][sel]
+    assert np.where(round_, 0.0, np.minimum(dang, 180.0 - dang)).max(initial=0) < 100 * centre_tol
+    np.testing.assert_allclose(extra[sel], ref[6][sel], rtol=extra_tol, atol=extra_tol)
 
 
 @pytest.mark.parametrize("passes", [3, 2])
-def test_measure_equals_the_numpy_mathematics_on_every_candidate(frames, passes):
-    # Against the same numpy code in float64: only the order of the sums differs (1e-11 px measured).
+def test_measure_equals_the_numpy_mathematics_on_every_blob(frames, passes):
+    """Against the same mathematics in numpy float64, on every candidate whose contrast is over 10 noise.
+
+    The kernel's per-pixel sums are float32 (1.7x faster than float64; docs/blobs.md, "Session 30"),
+    its solves float64.  On the sample takes' frames every such window agrees: centres to 2e-4 px
+    (measured 1.3e-4).  On the cluttered frames a few windows hold two blobs or a blob and a confuser,
+    whose systems are ill-conditioned, and a ring pixel at the edge of the plane's ring flips with a
+    centre 1e-5 px away: there 99 % agree to 5e-3 px and all to 0.05 px (measured 2.2e-3 and 0.026),
+    and ``ok`` on 99 %.  Windows of noise with one or two gradient lines (degenerate systems, decided by the
+    rounding as they were by the float32 numpy version) are not compared.
+    """
     n = 0
-    for white, image in frames:
+    cluttered = []
+    for i, (white, image) in enumerate(frames):
         pad, ix, iy, r, win, noise = _windows(white, image)
         new = centre.measure_at(pad, ix, iy, win, r, noise, passes)
         for hw in np.unique(win):
             k = np.flatnonzero(win == hw)
             ref = measure_reference(extract(pad, ix[k], iy[k], hw), r[k], noise, passes, dtype=np.float64)
-            _compare(ref, tuple(v[k] for v in new), 1e-8, 1e-6)
-            n += len(k)
-    assert n > 3000
+            blob = ref[6][:, 0] > 10 * noise
+            mine = tuple(v[k] for v in new)
+            if i % 2 == 0:                  # a sample take's frame (the fixture's order)
+                _compare(ref, mine, 2e-4, 1e-3, blob)
+                n += int(blob.sum())
+            else:
+                both = blob & ref[5] & mine[5]
+                cluttered.append((int(blob.sum()), int((mine[5] != ref[5])[blob].sum()),
+                                  np.hypot(mine[0] - ref[0], mine[1] - ref[1])[both]))
+    assert n > 800
+    total, flipped = sum(c[0] for c in cluttered), sum(c[1] for c in cluttered)
+    d = np.concatenate([c[2] for c in cluttered])
+    assert total > 300 and flipped <= 0.01 * total
+    assert np.percentile(d, 99) < 5e-3 and d.max() < 0.05
 
 
 def test_measure_matches_the_float32_version_on_real_blobs(frames):
@@ -86,7 +116,10 @@ def test_measure_matches_the_float32_version_on_real_blobs(frames):
     for hw in np.unique(win):
         k = np.flatnonzero(win == hw)
         ref = measure_reference(extract(pad, ix[k], iy[k], hw), r[k], noise, 3)
-        good = ref[5] & new[5][k] & (new[6][k, 0] > 10 * noise)
+        # A blob at the window's centre (by the float64 mathematics: where the answer wanders off to a
+        # neighbour at the window's edge, both float32 versions are decided by their rounding).
+        blob = measure_reference(extract(pad, ix[k], iy[k], hw), r[k], noise, 3, dtype=np.float64)[6][:, 0] > 10 * noise
+        good = ref[5] & new[5][k] & blob
         d = np.hypot(ref[0] - new[0][k], ref[1] - new[1][k])[good]
         assert d.max(initial=0) < 1e-4
         compared += int(good.sum())
@@ -104,7 +137,7 @@ def test_measure_on_isolated_discs_and_the_patch_interface():
     P = np.stack(patches)
     r0 = np.repeat([1.5, 3.0, 6.0], 8)
     new = centre.measure(P, r0, 2.0)
-    _compare(measure_reference(P, r0, 2.0, dtype=np.float64), new, 1e-8, 1e-6)
+    _compare(measure_reference(P, r0, 2.0, dtype=np.float64), new, 2e-4, 1e-3)
     assert new[5].all()
     err = np.hypot(new[0] - np.array(truth)[:, 0], new[1] - np.array(truth)[:, 1])
     assert np.median(err) < 0.1

@@ -12,8 +12,13 @@ frame).  Here every blob is a few plain loops over its window, compiled by numba
   that they are vectorised (4 lanes); nothing else of IEEE arithmetic is relaxed
   (no approximate division, no assumption that values are finite).
 
-Everything is float64 (the numpy version was float32): its results are the
-float64 numpy arithmetic's to ~1e-11 px (``tests/test_blob_measure_kernel.py``).
+The per-pixel loops are float32 (windows, gradients, weights and their sums: 16
+lanes to float64's 8, fit_round 1.7x faster); the solves on those sums and
+everything a blob's answer is made of are float64.  On the sample takes' blobs
+the centres are the float64 numpy arithmetic's to 2e-4 px, and the benchmark's
+detections score the same to four decimals (``tests/test_blob_measure_kernel.py``;
+docs/blobs.md, "Session 30").  Constants in those loops are float32 (``_0``,
+``_1``, ...): one float64 literal would widen the whole loop.
 Windows are flat arrays with their pixels' coordinates beside them: one long
 loop per step vectorises, where loops over each row's few pixels inside a
 weight's reach ran mostly in their scalar remainders (measured: full rows were
@@ -29,6 +34,9 @@ from numba import njit
 
 from ..jit import JIT, JIT_EXACT
 
+F32 = np.float32
+#: The per-pixel loops' constants as float32: a float64 literal would make numba widen the whole loop.
+_0, _HALF, _1, _2, _4, _NINTH = F32(0.0), F32(0.5), F32(1.0), F32(2.0), F32(4.0), F32(1.0 / 9.0)
 
 
 @njit(**JIT)
@@ -38,7 +46,7 @@ def taper(d2, reach, inv):
     Step 3, the taper of the weights beyond the blob's radius (of the lines, the
     centroid and the moments): ``reach = r + TAPER_OUT``, ``inv = 1 / (TAPER_OUT - TAPER_IN)``.
     """
-    return min(max((reach - math.sqrt(d2)) * inv, 0.0), 1.0)
+    return min(max((reach - math.sqrt(d2)) * inv, _0), _1)
 
 
 @njit(**JIT)
@@ -72,8 +80,8 @@ def window_gradients(P, n, tmp, gx, gy):
     for k in range(L):
         s = Pd[k] - Pa[k]
         t = Pc[k] - Pb[k]
-        rxa[k] = 0.5 * (s - t)
-        rya[k] = 0.5 * (s + t)
+        rxa[k] = _HALF * (s - t)
+        rya[k] = _HALF * (s + t)
     # The 3x3 sum: sums of three rows (the edge rows replicated), then of three columns.
     last = (m - 1) * n
     below = min(n, last)
@@ -94,7 +102,7 @@ def window_gradients(P, n, tmp, gx, gy):
         su, sc, sd, vya = ry[0:K], ry[n:K + n], ry[2 * n:K + 2 * n], vy[n:K + n]
         for k in range(K):
             vya[k] = su[k] + sc[k] + sd[k]
-    ninth = 1.0 / 9.0
+    ninth = _NINTH
     # Unsigned offsets, not row views: a view is an atomic reference count taken and dropped,
     # four a row here (~100 a window), and unsigned indices need no wrap-around test either.
     u1, u2 = np.uint64(1), np.uint64(2)
@@ -121,7 +129,7 @@ def gradient_sums(gx, gy, m, sums):
     The window's gradient energy for any background slope follows from them
     (the ``edge_share`` measurement).
     """
-    sx = sy = sxx = syy = 0.0
+    sx = sy = sxx = syy = _0
     gxa, gya = gx[:m * m], gy[:m * m]
     for k in range(m * m):
         sx += gxa[k]
@@ -140,10 +148,11 @@ def ring_plane(P, X, Y, h, cx, cy, r, noise, ring_in, ring_out, slope_k, plane):
     plane), then the slope is shrunk by ``slope_k`` times the slope noise alone
     would give.  Writes ``plane[0:3]``; returns the ring's pixel count.
     """
-    lo = (r + ring_in) * (r + ring_in)
-    hi = (r + ring_out) * (r + ring_out)
-    s0 = sx = sy = sxx = sxy = syy = 0.0
-    rb = rx = ry = sd2 = 0.0
+    lo = F32((r + ring_in) * (r + ring_in))
+    hi = F32((r + ring_out) * (r + ring_out))
+    c32x, c32y = F32(cx), F32(cy)
+    s0 = sx = sy = sxx = sxy = syy = _0
+    rb = rx = ry = sd2 = _0
     n = 2 * h + 1
     i0, i1 = rows(cy, r + ring_out, h, n)
     # The rows by unsigned offsets (no views: each is an atomic reference count; a loop starting past
@@ -153,10 +162,10 @@ def ring_plane(P, X, Y, h, cx, cy, r, noise, ring_in, ring_out, slope_k, plane):
         k = k0 + np.uint64(kk)
         x = X[k]
         y = Y[k]
-        dx = x - cx
-        dy = y - cy
+        dx = x - c32x
+        dy = y - c32y
         d2 = dx * dx + dy * dy
-        f = 1.0 if (d2 >= lo) & (d2 <= hi) else 0.0
+        f = _1 if (d2 >= lo) & (d2 <= hi) else _0
         v = f * P[k]
         s0 += f
         sx += f * x
@@ -168,6 +177,9 @@ def ring_plane(P, X, Y, h, cx, cy, r, noise, ring_in, ring_out, slope_k, plane):
         rx += v * x
         ry += v * y
         sd2 += f * d2
+    # The solve in float64 (the sums are float32, to ~1e-6 of themselves).
+    s0, sx, sy, sxx, sxy, syy = float(s0), float(sx), float(sy), float(sxx), float(sxy), float(syy)
+    rb, rx, ry, sd2 = float(rb), float(rx), float(ry), float(sd2)
     a00, a11, a22 = s0 + 1e-3, sxx + 1e-3, syy + 1e-3
     # Cramer's rule on the symmetric 3x3 normal equations.
     c00 = a11 * a22 - sxy * sxy
@@ -199,10 +211,11 @@ def lines_centre(gx0, gy0, GX, GY, h, plane, cx, cy, reach, inv, noise, lim, sol
     distances.  A degenerate system keeps the old centre; the answer is clipped
     to ``lim``.  Writes ``sol = (x, y)``.
     """
-    nz = noise * noise
+    nz = F32(noise * noise)
     b1 = plane[1]
     b2 = plane[2]
-    sxx = syy = sxy = bx = by = 0.0
+    c32x, c32y, reach32, inv32 = F32(cx), F32(cy), F32(reach), F32(inv)
+    sxx = syy = sxy = bx = by = _0
     m = 2 * h
     i0, i1 = rows(cy, reach, h - 0.5, m)
     k0 = np.uint64(i0 * m)
@@ -210,11 +223,11 @@ def lines_centre(gx0, gy0, GX, GY, h, plane, cx, cy, reach, inv, noise, lim, sol
         k = k0 + np.uint64(kk)
         px = GX[k]
         py = GY[k]
-        dx = px - cx
-        dy = py - cy
+        dx = px - c32x
+        dy = py - c32y
         gx = gx0[k] - b1
         gy = gy0[k] - b2
-        w = taper(dx * dx + dy * dy, reach, inv) * max(gx * gx + gy * gy - nz, 0.0)
+        w = taper(dx * dx + dy * dy, reach32, inv32) * max(gx * gx + gy * gy - nz, _0)
         wgx = w * gx
         wgy = w * gy
         sxx += wgy * gy
@@ -223,6 +236,7 @@ def lines_centre(gx0, gy0, GX, GY, h, plane, cx, cy, reach, inv, noise, lim, sol
         npx = gx * py - gy * px
         bx -= wgy * npx
         by += wgx * npx
+    sxx, syy, sxy, bx, by = float(sxx), float(syy), float(sxy), float(bx), float(by)
     det = sxx * syy - sxy * sxy
     if det > 1e-12 * (sxx + syy) ** 2 + 1e-20:
         cx = (syy * bx - sxy * by) / det
@@ -240,16 +254,17 @@ def inside_moments(D, X, Y, h, a, cx, cy, reach, inv, mom):
     mxy)``, sums of the tapered map times 1, dx, dy, dx^2, dy^2, dx dy, with
     dx, dy from (cx, cy).
     """
-    s = 2.0 / a
-    m0 = mx = my = mxx = myy = mxy = 0.0
+    s = F32(2.0 / a)
+    c32x, c32y, reach32, inv32 = F32(cx), F32(cy), F32(reach), F32(inv)
+    m0 = mx = my = mxx = myy = mxy = _0
     n = 2 * h + 1
     i0, i1 = rows(cy, reach, h, n)
     k0 = np.uint64(i0 * n)
     for kk in range(i1 * n - i0 * n):
         k = k0 + np.uint64(kk)
-        dx = X[k] - cx
-        dy = Y[k] - cy
-        v = min(max(D[k] * s - 0.5, 0.0), 1.0) * taper(dx * dx + dy * dy, reach, inv)
+        dx = X[k] - c32x
+        dy = Y[k] - c32y
+        v = min(max(D[k] * s - _HALF, _0), _1) * taper(dx * dx + dy * dy, reach32, inv32)
         m0 += v
         mx += v * dx
         my += v * dy
@@ -293,34 +308,36 @@ def measure_one(h, r, noise, passes, c, S, out):
         px, py = sol[0], sol[1]
         ring_n = ring_plane(P, X, Y, h, px, py, r, noise, ring_in, ring_out, slope_k, plane)
         lines_centre(gx0, gy0, GX, GY, h, plane, px, py, reach, inv, noise, lim, sol)
-    lx, ly = sol[0], sol[1]   # the lines' centre
+    lx, ly = float(sol[0]), float(sol[1])   # the lines' centre
     b0, b1, b2 = plane[0], plane[1], plane[2]
     # The background-subtracted window, and the residual of the background in the last ring.
-    lo = (r + ring_in) * (r + ring_in)
-    hi = (r + ring_out) * (r + ring_out)
-    rd2 = 0.0
+    lo = F32((r + ring_in) * (r + ring_in))
+    hi = F32((r + ring_out) * (r + ring_out))
+    rd2 = _0
+    p32x, p32y = F32(px), F32(py)
     for k in range(npx):
         d = P[k] - b0 - b1 * X[k] - b2 * Y[k]
         D[k] = d
-        dx = X[k] - px
-        dy = Y[k] - py
+        dx = X[k] - p32x
+        dy = Y[k] - p32y
         d2 = dx * dx + dy * dy
-        rd2 += d * d if (d2 >= lo) & (d2 <= hi) else 0.0
-    border_std = math.sqrt(rd2 / max(ring_n, 1.0))
+        rd2 += d * d if (d2 >= lo) & (d2 <= hi) else _0
+    px, py = float(px), float(py)
+    border_std = math.sqrt(float(rd2) / max(ring_n, 1.0))
     # Contrast: the background-subtracted maximum of the centre 3x3.
     a_n = -np.inf
     for i in range(h - 1, h + 2):
         for j in range(h - 1, h + 2):
-            a_n = max(a_n, D[i * n + j])
+            a_n = max(a_n, float(D[i * n + j]))
     a = max(a_n, 0.5 * noise + 1e-3)
     # The inside map's centroid about the lines' centre, then the blend.
     inside_moments(D, X, Y, h, a, lx, ly, reach, inv, mom)
-    m0 = max(mom[0], 1e-6)
-    cx = lx + (1.0 - mix) * mom[1] / m0
-    cy = ly + (1.0 - mix) * mom[2] / m0
+    m0 = max(float(mom[0]), 1e-6)
+    cx = lx + (1.0 - mix) * float(mom[1]) / m0
+    cy = ly + (1.0 - mix) * float(mom[2]) / m0
     inside_moments(D, X, Y, h, a, cx, cy, reach, inv, mom)
-    m0 = max(mom[0], 1e-6)
-    mxx, myy, mxy = mom[3] / m0, mom[4] / m0, mom[5] / m0
+    m0 = max(float(mom[0]), 1e-6)
+    mxx, myy, mxy = float(mom[3]) / m0, float(mom[4]) / m0, float(mom[5]) / m0
     tr = mxx + myy
     det = mxx * myy - mxy * mxy
     disc = math.sqrt(max(tr * tr / 4.0 - det, 0.0))
@@ -361,22 +378,27 @@ def measure_extra(h, r, noise, c, S, state, extra):
     ry = math.sqrt(4.0 * core_q * max(myy, 0.0) * mdet / det) if det > 0.0 else float(n)
     i0, i1 = rows(cy, ry, h, n)
     Dc, Xc, Yc = D[i0 * n:i1 * n], X[i0 * n:i1 * n], Y[i0 * n:i1 * n]
-    nc = cs = cs2 = 0.0
+    c32x, c32y = F32(cx), F32(cy)
+    qxx, qyy, qxy, q4, cq = F32(mxx), F32(myy), F32(2.0 * mxy), F32(4.0 * mdet), F32(core_q)
+    nc = cs = cs2 = _0
     for k in range(len(Xc)):
-        dx = Xc[k] - cx
-        dy = Yc[k] - cy
-        f = 1.0 if (myy * dx * dx - 2.0 * mxy * dx * dy + mxx * dy * dy) / (4.0 * mdet) < core_q else 0.0
+        dx = Xc[k] - c32x
+        dy = Yc[k] - c32y
+        f = _1 if (qyy * dx * dx - qxy * dx * dy + qxx * dy * dy) / q4 < cq else _0
         nc += f
         cs += f * Dc[k]
         cs2 += f * (Dc[k] * Dc[k])
-    nc = max(nc, 1.0)
+    nc = max(float(nc), 1.0)
+    cs, cs2 = float(cs), float(cs2)
     cmean = cs / nc
     core_std = math.sqrt(max(cs2 / nc - cmean * cmean, 0.0)) / a
     # How well the last solve's lines (weights about the centre they were solved about) meet
     # the lines' centre; the edge's sharpness and its share of the window's gradient energy
     # (weights about the answer).
-    nz = noise * noise
-    wd2 = wg2_last = wg2 = wg = 0.0
+    nz = F32(noise * noise)
+    p32x, p32y, l32x, l32y = F32(px), F32(py), F32(lx), F32(ly)
+    reach32, inv32 = F32(reach), F32(inv)
+    wd2 = wg2_last = wg2 = wg = _0
     i0, i1 = rows(py, reach, h - 0.5, m)
     j0, j1 = rows(cy, reach, h - 0.5, m)
     k0, k1 = min(i0, j0) * m, max(i1, j1) * m
@@ -387,15 +409,20 @@ def measure_extra(h, r, noise, c, S, state, extra):
         gx = gxv[k] - b1
         gy = gyv[k] - b2
         g2 = gx * gx + gy * gy
-        w = taper((gxx - px) ** 2 + (gyy - py) ** 2, reach, inv) * max(g2 - nz, 0.0)
-        dist = gx * (ly - gyy) - gy * (lx - gxx)
+        ex, ey = gxx - p32x, gyy - p32y
+        w = taper(ex * ex + ey * ey, reach32, inv32) * max(g2 - nz, _0)
+        dist = gx * (l32y - gyy) - gy * (l32x - gxx)
         wd2 += w * dist * dist
         wg2_last += w * g2
-        wt = taper((gxx - cx) ** 2 + (gyy - cy) ** 2, reach, inv)
+        ex, ey = gxx - c32x, gyy - c32y
+        wt = taper(ex * ex + ey * ey, reach32, inv32)
         wg2 += wt * g2
         wg += wt * math.sqrt(g2)
+    wd2, wg2_last, wg2, wg = float(wd2), float(wg2_last), float(wg2), float(wg)
+    b0, b1, b2 = float(b0), float(b1), float(b2)
     # sum (g - b)^2 over the window, expanded: the plane's slope is one number per blob.
-    g2_all = gsum[2] + gsum[3] - 2.0 * (b1 * gsum[0] + b2 * gsum[1]) + mpx * (b1 * b1 + b2 * b2)
+    g2_all = (float(gsum[2]) + float(gsum[3]) - 2.0 * (b1 * float(gsum[0]) + b2 * float(gsum[1]))
+              + mpx * (b1 * b1 + b2 * b2))
     line_rms = math.sqrt(wd2 / max(wg2_last, 1e-9))
     sharp = wg2 / max(wg, 1e-6) / a
     edge_share = wg2 / max(g2_all, 1e-6)
@@ -440,7 +467,7 @@ def measure_at(img, ix, iy, hs, r0, noise, passes, c, out, extra, start, again):
     hmax = 1
     for k in range(len(hs)):
         hmax = max(hmax, hs[k])
-    S = np.empty((13, (2 * hmax + 1) ** 2))
+    S = np.empty((13, (2 * hmax + 1) ** 2), np.float32)
     P, X, Y, GX, GY = S[0], S[1], S[2], S[6], S[7]
     h_grid = -1
     # By window size, so that the pixels' coordinates are laid out once per size.
