@@ -9,7 +9,7 @@ frame).  Here every blob is a few plain loops over its window, compiled by numba
   worker processes of Detect Blobs [Active Range] load it instead of compiling;
 - ``nogil=True``: a thread running a kernel lets the others run;
 - ``fastmath={"reassoc"}`` and branch-free loop bodies: sums may be reordered so
-  that they are vectorised (4 lanes); nothing else of IEEE arithmetic is relaxed
+  that they are vectorised; nothing else of IEEE arithmetic is relaxed
   (no approximate division, no assumption that values are finite).
 
 The per-pixel loops are float32 (windows, gradients, weights and their sums: 16
@@ -36,7 +36,7 @@ from ..jit import JIT, JIT_EXACT
 
 F32 = np.float32
 #: The per-pixel loops' constants as float32: a float64 literal would make numba widen the whole loop.
-_0, _HALF, _1, _2, _4, _NINTH = F32(0.0), F32(0.5), F32(1.0), F32(2.0), F32(4.0), F32(1.0 / 9.0)
+_0, _HALF, _1, _NINTH = F32(0.0), F32(0.5), F32(1.0), F32(1.0 / 9.0)
 
 
 @njit(**JIT)

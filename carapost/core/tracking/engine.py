@@ -210,7 +210,8 @@ class FrameResult:
     brim_score: np.ndarray   #: (B, S)
     brim_err: np.ndarray     #: (B, S) px
     #: (N,) points whose sample on the frame before this one was a return from a loss on two views that this
-    #: frame did not confirm (:attr:`FrameTracker.tentative`): the caller takes that sample back.
+    #: frame did not confirm (:attr:`FrameTracker.tentative`), or on one blob that this frame did not measure
+    #: (:data:`SINGLE_RETURN_FOLLOWED`): the caller takes that sample back.
     retract: np.ndarray | None = None
     #: Rows at the end that are new points (markers no point followed), made on this frame.
     new: int = 0
