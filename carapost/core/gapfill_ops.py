@@ -59,10 +59,9 @@ def weak_samples(point) -> np.ndarray:
     (docs/tracking.md, "Session 30").  Samples with no 2D samples at all (a C3D's,
     or placed by hand) are not weak.
     """
-    views = point.src != SRC_NONE
     firm = np.isin(point.src, (SRC_DETECTION, SRC_TARGET, SRC_KEYFRAME)).sum(axis=1)
     tracked = (point.status != ST_NONE) & (point.status != ST_INTERPOLATED)
-    return tracked & views.any(axis=1) & (firm < FIRM_VIEWS)
+    return tracked & (point.contributing() > 0) & (firm < FIRM_VIEWS)
 
 
 def interpolate_gaps(project, point_ids=None, start: int | None = None, end: int | None = None,
@@ -125,7 +124,7 @@ def interpolate_gaps(project, point_ids=None, start: int | None = None, end: int
         gaps[col[pid]] = g
         weak[col[pid]] = weak_samples(p)
         if single and project.rig is not None:
-            n_src = np.count_nonzero(p.src != SRC_NONE, axis=1)
+            n_src = p.contributing()
             for f in np.flatnonzero(g & (n_src == 1)):
                 s = int(np.flatnonzero(p.src[f] != SRC_NONE)[0])
                 uv = p.uv[f, s]

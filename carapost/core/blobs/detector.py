@@ -192,13 +192,14 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
             # measurement took it in): it must not win the merge below.
             moved = np.hypot(out[0] - x, out[1] - y)
             ok &= moved <= np.maximum(np.maximum(0.5 * out[2], r0), 2.0)
-            was = ok.copy()
             good = np.flatnonzero(ok)
             # Of one blob's candidates, the one nearest the answer (its window was the best centred).
-            keep = good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]
+            kept = _dedupe(out[0][good], out[1][good], out[3][good], -moved[good])
             ok[good] = False
-            ok[keep] = True
-            merged = np.flatnonzero(was & ~ok)      # good less keep, in order (setdiff1d took 0.08 ms)
+            ok[good[kept]] = True
+            dropped = np.ones(len(good), bool)
+            dropped[kept] = False
+            merged = good[dropped]                  # good less the kept, in order (setdiff1d took 0.08 ms)
             first = out[0][merged], out[1][merged], np.maximum(2.0, 0.5 * out[3][merged])
         # The ok ones whose centre moved over half a pixel or whose weights' radius
         # clip(GROW * major / 2, 1, WINDOWS[-1] - BORDER) changed by over a tenth; (cx, cy, rr) updated.

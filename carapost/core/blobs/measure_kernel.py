@@ -322,7 +322,6 @@ def measure_one(h, r, noise, passes, c, S, out):
         dy = Y[k] - p32y
         d2 = dx * dx + dy * dy
         rd2 += d * d if (d2 >= lo) & (d2 <= hi) else _0
-    px, py = float(px), float(py)
     border_std = math.sqrt(float(rd2) / max(ring_n, 1.0))
     # Contrast: the background-subtracted maximum of the centre 3x3.
     a_n = -np.inf
