@@ -123,3 +123,29 @@ def greedy_nms_reference(pts: np.ndarray, score: np.ndarray, clash) -> np.ndarra
             for j in nbr.get(i, ()):
                 alive[j] = False
     return np.flatnonzero(alive)
+
+
+def fit_features_reference(cand, sel, logit1, x, y, major, minor, extra, rescued) -> np.ndarray:
+    """Stage 2's inputs as numpy expressions (``detector._fit_features`` before it was compiled)."""
+    from carapost.core.blobs.model import FIT_FEATURE_NAMES
+
+    moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
+    contrast, line_rms, sharp, border_std, slope, fill, edge_share, background, core_std = extra.T
+    light = background if cand.white else 255.0 - background
+    r = np.maximum(0.5 * major, 0.5)
+    F = np.zeros((len(sel), len(FIT_FEATURE_NAMES)), np.float32)
+    F[:, 0] = np.clip(logit1[sel], -30, 30)
+    F[:, 1] = np.log(np.clip(contrast, 1e-3, 1e4) / cand.noise)
+    F[:, 2] = np.log(np.clip(major, 0.5, 500))
+    F[:, 3] = np.clip(minor / np.maximum(major, 1e-6), 0, 1)
+    F[:, 4] = np.clip(line_rms / r, 0, 5)
+    F[:, 5] = np.log(np.clip(sharp, 1e-3, 10))
+    F[:, 6] = np.clip(border_std / np.maximum(contrast, 1e-3), 0, 5)
+    F[:, 7] = np.clip(slope, 0, 10)
+    F[:, 8] = np.clip(fill, 0, 5)
+    F[:, 9] = np.clip(edge_share, 0, 1)
+    F[:, 10] = np.clip(moved / np.maximum(cand.radius[sel], 1.0), 0, 5)
+    F[:, 11] = np.clip(contrast / np.maximum(light, 1.0), 0, 5)
+    F[:, 12] = np.clip(core_std, 0, 5)
+    F[:, 13] = rescued
+    return F

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
-from blob_features_reference import (candidates_reference, features_reference, greedy_nms_reference,
+from blob_features_reference import (candidates_reference, features_reference, fit_features_reference, greedy_nms_reference,
                                      maxima_reference, noise_sigma_reference, subpixel_reference)
 from blob_measure_reference import extract, measure_reference
 from carapost.core.blobs import candidate_kernel as ck
@@ -273,6 +273,7 @@ def test_detections_equal_those_of_the_numpy_paths(frames, monkeypatch):
     monkeypatch.setattr(fe, "features", features_reference)
     monkeypatch.setattr(fe, "candidates", candidates_reference)
     monkeypatch.setattr(fe, "noise_sigma", noise_sigma_reference)
+    monkeypatch.setattr(det, "_fit_features", fit_features_reference)
     old = [det.detect(image, white=white) for white, image in frames]
     assert sum(len(r) for r in new) > 200
     for a, b in zip(new, old):
@@ -282,6 +283,35 @@ def test_detections_equal_those_of_the_numpy_paths(frames, monkeypatch):
         # Stored as float16: paths 1e-6 apart may round to neighbouring float16 values (2**-10 apart, relative).
         np.testing.assert_allclose(a["major"], b["major"], rtol=2.0 ** -10, atol=1e-3)
         np.testing.assert_allclose(a["score"], b["score"], atol=1e-4)
+
+
+def test_the_compiled_stage2_features_are_numpys_to_the_bit(frames, monkeypatch):
+    """``measure_kernel.fit_features`` gives numpy's float32 features, NaN rows included (merged blobs)."""
+    seen = []
+
+    def record(cand, sel, logit1, x, y, major, minor, extra, rescued):
+        F = fit_features_reference(cand, sel, logit1, x, y, major, minor, extra, rescued)
+        seen.append((cand, sel, logit1, x.copy(), y.copy(), major.copy(), minor.copy(), extra.copy(),
+                     np.asarray(rescued).copy(), F))
+        return F
+
+    monkeypatch.setattr(det, "_fit_features", record)
+    for white, image in frames:
+        det.detect(image, white=white)
+    monkeypatch.undo()
+    # Every feature clipped at both ends, NaN measurements, and the rescue flag flipped.
+    cand, sel, logit1, x, y, major, minor, extra, rescued, _ = seen[0]
+    rng = np.random.default_rng(5)
+    case = (cand, sel, logit1 * 50, x, y, major * rng.uniform(0, 300, len(x)), minor,
+            extra * rng.uniform(0, 40, extra.shape), ~rescued.astype(bool))
+    case[7][::7] = np.nan
+    seen.append(case + (fit_features_reference(*case),))
+    rows = nan_rows = 0
+    for cand, sel, logit1, x, y, major, minor, extra, rescued, F in seen:
+        assert det._fit_features(cand, sel, logit1, x, y, major, minor, extra, rescued).tobytes() == F.tobytes()
+        rows += len(F)
+        nan_rows += int(np.isnan(extra).any(1).sum())
+    assert rows > 500 and nan_rows > 10
 
 
 def test_the_compiled_profile_radius_is_numpys_to_the_bit(frames):

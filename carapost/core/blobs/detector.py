@@ -25,7 +25,7 @@ from ..heap import keep_freed_memory
 from . import features as fe
 from .candidate_kernel import LEVEL_SCALE, apart, engulfing, greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
-from .measure_kernel import fit_round, next_round
+from .measure_kernel import fit_features, fit_round, next_round
 from .edges import TRUST, TRUST_TEXTURED, edge_ellipses, refine_centres
 from .model import EDGE_FEATURE_NAMES, FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
@@ -375,28 +375,21 @@ class Fitted:
 
 
 def _fit_features(cand: Candidates, sel, logit1, x, y, major, minor, extra, rescued) -> np.ndarray:
-    """Stage 2's inputs (:data:`~.model.FIT_FEATURE_NAMES`) of the fits of candidates ``sel``."""
-    moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
-    contrast, line_rms, sharp, border_std, slope, fill, edge_share, background, core_std = extra.T
-    # The skin's light at the blob: the background on the image (white blobs) or 255 less it
-    # on the inverted image (black ones).
-    light = background if cand.white else 255.0 - background
-    r = np.maximum(0.5 * major, 0.5)
-    F = np.zeros((len(sel), len(FIT_FEATURE_NAMES)), np.float32)
-    F[:, 0] = np.clip(logit1[sel], -30, 30)
-    F[:, 1] = np.log(np.clip(contrast, 1e-3, 1e4) / cand.noise)
-    F[:, 2] = np.log(np.clip(major, 0.5, 500))
-    F[:, 3] = np.clip(minor / np.maximum(major, 1e-6), 0, 1)
-    F[:, 4] = np.clip(line_rms / r, 0, 5)
-    F[:, 5] = np.log(np.clip(sharp, 1e-3, 10))
-    F[:, 6] = np.clip(border_std / np.maximum(contrast, 1e-3), 0, 5)
-    F[:, 7] = np.clip(slope, 0, 10)
-    F[:, 8] = np.clip(fill, 0, 5)
-    F[:, 9] = np.clip(edge_share, 0, 1)
-    F[:, 10] = np.clip(moved / np.maximum(cand.radius[sel], 1.0), 0, 5)
-    F[:, 11] = np.clip(contrast / np.maximum(light, 1.0), 0, 5)
-    F[:, 12] = np.clip(core_std, 0, 5)
-    F[:, 13] = rescued
+    """Stage 2's inputs (:data:`~.model.FIT_FEATURE_NAMES`) of the fits of candidates ``sel``.
+
+    Compiled (:func:`.measure_kernel.fit_features`): the log of the contrast over the image's
+    noise, of the major axis and of the edge's sharpness; the axis ratio; the lines' scatter over
+    the radius; the ring's residual over the contrast; the background's slope; the fill; the
+    edge's share; how far the fit moved from its candidate, in candidate radii; the depth (the
+    contrast over the skin's light: the background on the image for white blobs, 255 less it on
+    the inverted image for black ones); the core's uniformity; whether the ellipse came from the
+    candidate's own edge.  Each clipped to a sane range.
+    """
+    F = np.empty((len(sel), len(FIT_FEATURE_NAMES)), np.float32)
+    if len(sel):
+        fit_features(logit1[sel], cand.x[sel], cand.y[sel], cand.radius[sel], x, y, major, minor,
+                     np.ascontiguousarray(extra, np.float64), np.asarray(rescued, bool), float(cand.noise),
+                     bool(cand.white), F)
     return F
 
 
