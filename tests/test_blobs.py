@@ -338,6 +338,66 @@ def test_detect_range_cancel_leaves_project_untouched(take):
     assert take.digest() == before
 
 
+@pytest.fixture
+def pico_take(tmp_path):
+    """A 2-channel ``.pico`` take of 30 frames (I-frame every 8) with black discs that move."""
+    from carapost.io.pico import write_pico
+    from carapost.io.take import project_from_input
+
+    for ch in range(2):
+        frames = [_discs([4.0] * 4, seed=100 * ch + f, size=(160, 320))[0] for f in range(30)]
+        write_pico(tmp_path / f"Runs_{ch}.pico", frames, channel=ch, gop=8)
+    return project_from_input(tmp_path / "Runs_0.pico", None)
+
+
+def test_range_workers_decode_their_own_runs(pico_take, monkeypatch):
+    """Detect Blobs [Active Range] on pico media: runs start at I-frames, and two workers detect what one does."""
+    from carapost.core import blob_ops
+    from carapost.io.media import open_source
+
+    src = open_source(pico_take.sensors[0].media.path)
+    runs = blob_ops._runs(src, 3, 29, size=10)
+    assert list(src.keyframes) == [0, 8, 16, 24]
+    src.close()
+    # Contiguous, covering 3..28; every run after the first starts at the I-frame at or before 13, 23.
+    assert runs == [(3, 8), (8, 16), (16, 29)]
+    monkeypatch.setattr(blob_ops, "RUN_FRAMES", 10)
+    one = detect_blobs_range(pico_take, 0, 29, workers=1).cells
+    two = detect_blobs_range(pico_take, 0, 29, workers=2).cells
+    assert sorted(one) == sorted(two) == [(s, f) for s in range(2) for f in range(30)]
+    assert all(np.array_equal(one[k], two[k]) for k in one)
+    assert sum(len(v) for v in one.values()) >= 2 * 30 * 4
+    # The frames the workers decoded (one decoder thread each) are the file's: the same detections as on
+    # frames read one by one with the default decoder.
+    from carapost.core.blobs import detect_with_properties
+
+    src = open_source(pico_take.sensors[1].media.path)
+    for f in (0, 7, 8, 29):
+        assert np.array_equal(detect_with_properties(src.read(f), pico_take.properties), one[(1, f)])
+    src.close()
+
+
+def test_a_failing_run_stops_the_range_and_leaves_the_project_untouched(pico_take, monkeypatch):
+    from carapost.core import blob_ops
+
+    monkeypatch.setattr(blob_ops, "RUN_FRAMES", 10)
+    real = blob_ops.detect_with_settings
+    seen = []
+
+    def failing(img, settings):
+        seen.append(1)
+        if len(seen) == 5:
+            raise CaraError("frame 4: cannot be read")
+        return real(img, settings)
+
+    monkeypatch.setattr(blob_ops, "detect_with_settings", failing)
+    before = pico_take.digest()
+    with pytest.raises(CaraError, match="cannot be read"):
+        detect_blobs_range(pico_take, 0, 29, workers=2)
+    assert pico_take.digest() == before
+    assert len(seen) < 2 * 30          # the runs not started were dropped: the take was not detected to its end
+
+
 def test_redetect_keeps_attachments_within_1px(take):
     stack = UndoStack(take)
     stack.push(detect_blobs_current_frame(take, 2, sensors=[0]))

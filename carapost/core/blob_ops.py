@@ -18,8 +18,9 @@ sensor on that frame (its 3D position is kept).
 from __future__ import annotations
 
 import os
+import threading
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from typing import Iterable
 
@@ -181,13 +182,13 @@ def _sensors(project, sensors) -> list[int]:
     return out
 
 
-def _open(project, s):
+def _open(project, s, decode_threads: int | None = None):
     from ..io.media import open_source  # io depends on core, not the reverse: import late
 
     m = project.sensors[s].media
     if not m.path:
         raise CaraError(f"sensor {s} has no media to detect blobs on")
-    return open_source(m.path)
+    return open_source(m.path, decode_threads=decode_threads)
 
 
 def detect_blobs_current_frame(project, frame: int, sensors: Iterable[int] | None = None,
@@ -295,12 +296,104 @@ def detect_frames(frames: Iterable[tuple[object, np.ndarray]], properties, worke
     return out
 
 
+#: Detect Blobs [Active Range]: a worker decodes and detects runs of about this many frames of one channel.
+RUN_FRAMES = 48
+
+
+def _runs(source, m0: int, m1: int, size: int = RUN_FRAMES) -> list[tuple[int, int]]:
+    """``[a, b)`` runs covering frames ``m0 .. m1-1`` of ``source``, each after the first starting at a keyframe.
+
+    A run that starts at a keyframe decodes nothing before its first frame; runs of
+    ``size`` frames keep both workers busy on one channel as on four.
+    """
+    starts = [m0]
+    for a in range(m0 + size, m1, size):
+        g = source.gop_start(a)
+        if g > starts[-1]:
+            starts.append(g)
+    return list(zip(starts, starts[1:] + [m1]))
+
+
+def detect_media(project, plan, workers: int | None = None, progress: Progress | None = None) -> dict:
+    """Detect blobs on the project's media: ``plan`` is ``[(sensor, image_offset, first, stop)]`` (media frames).
+
+    Each worker thread decodes its own runs of frames (:func:`_runs`; its own
+    decoder per channel, with one decoder thread) and detects them, so decoding is
+    spread over the cores with the detection.  Measured on the 2-core machine, 120
+    frames of a 35-marker ``carapost sample`` take (lossless: ~9.6 ms of CPU to decode
+    a 1280x720 frame): 102-105 frames/s on 1.92 cores, where the calling thread
+    decoding for a pool that detected (its decoder's two slice threads cost ~1.2x the
+    CPU of one) gave 97-102 on 1.82, and the same detections.  Returns ``{(sensor,
+    take frame): records}``; raises :class:`~carapost.core.progress.Cancelled` (the
+    frames done are dropped) or the first error of a run (the others stop).
+    """
+    keep_freed_memory()
+    workers = workers or default_workers()
+    settings = blob_settings(project.properties)
+    tasks = []
+    for s, off, m0, m1 in plan:
+        src = _open(project, s)
+        try:
+            m0, m1 = max(0, m0), min(m1, src.frame_count)
+            tasks += [(s, off, a, b) for a, b in (_runs(src, m0, m1) if m0 < m1 else [])]
+        finally:
+            src.close()
+    opened, lock, local, stop = [], threading.Lock(), threading.local(), threading.Event()
+
+    def source(s):
+        cache = getattr(local, "sources", None)
+        if cache is None:
+            cache = local.sources = {}
+        if s not in cache:
+            cache[s] = _open(project, s, decode_threads=1)
+            with lock:
+                opened.append(cache[s])
+        return cache[s]
+
+    def run(s, off, a, b):
+        out = {}
+        for m, img in source(s).read_range(a, b):
+            if stop.is_set():
+                break                       # another run failed or was cancelled
+            if progress is not None:
+                progress.check()            # raises Cancelled
+            out[(s, m + off)] = detect_with_settings(img, settings)
+            if progress is not None:
+                progress.step()
+        return out
+
+    cells: dict = {}
+    try:
+        if workers <= 1:
+            for t in tasks:
+                cells.update(run(*t))
+            return cells
+        with _one_opencv_thread():
+            pool = ThreadPoolExecutor(workers, thread_name_prefix="detect-blobs")
+            try:
+                futures = [pool.submit(run, *t) for t in tasks]
+                # The first failure (a cancel, an unreadable file) ends the run: the others stop at their next frame.
+                done, _ = wait(futures, return_when=FIRST_EXCEPTION)
+                for f in futures:
+                    if f in done and f.exception() is not None:
+                        raise f.exception()
+                for f in futures:
+                    cells.update(f.result())
+            finally:
+                stop.set()
+                pool.shutdown(wait=True, cancel_futures=True)
+        return cells
+    finally:
+        for src in opened:
+            src.close()
+
+
 def detect_blobs_range(project, start: int, end: int, sensors: Iterable[int] | None = None,
                        progress: Progress | None = None, workers: int | None = None) -> DetectBlobs:
     """Process > Detect Blobs [Active Range]: every frame ``start..end`` (inclusive).
 
-    Frames are decoded sequentially per sensor (one ``read_range`` each) and
-    detected on ``workers`` threads (default: every core).
+    Each of ``workers`` threads (default: every core) decodes and detects its own
+    runs of frames (:func:`detect_media`).
 
     Parameters
     ----------
@@ -326,17 +419,7 @@ def detect_blobs_range(project, start: int, end: int, sensors: Iterable[int] | N
         plan.append((s, off, start - off, end + 1 - off))
     if progress is not None:
         progress.start(len(sens) * (end - start + 1), "Detect Blobs")
-
-    def stream():
-        for s, off, m0, m1 in plan:
-            src = _open(project, s)
-            try:
-                for m, img in src.read_range(max(0, m0), min(m1, src.frame_count)):
-                    yield (s, m + off), img
-            finally:
-                src.close()
-
-    cells = detect_frames(stream(), project.properties, workers, progress)
+    cells = detect_media(project, plan, workers, progress)
     return DetectBlobs(dict(sorted(cells.items())), name="Detect Blobs [Active Range]")
 
 
@@ -358,5 +441,5 @@ def read_blob_parameters_from_pico(project) -> SetProperties:
 
 
 __all__ = ["DetectBlobs", "RemoveUnusedDetections", "blob_preview", "detect_blobs_current_frame",
-           "detect_blobs_range", "detect_frames", "remove_unused_detections", "read_blob_parameters_from_pico",
+           "detect_blobs_range", "detect_frames", "detect_media", "remove_unused_detections", "read_blob_parameters_from_pico",
 ]

@@ -132,9 +132,9 @@ class PicoSource(FrameSource):
 
     kind = "pico"
 
-    def __init__(self, path):
+    def __init__(self, path, decode_threads: int | None = None):
         super().__init__(path)
-        self.reader = PicoReader(path)
+        self.reader = PicoReader(path, decode_threads=decode_threads)
         r = self.reader
         self.width, self.height, self.frame_count = r.width, r.height, r.frame_count
         self.frame_rate, self.metadata, self.channel = r.frame_rate, r.metadata, r.channel
@@ -464,12 +464,15 @@ class ImageFolderSource(FrameSource):
 
 # --------------------------------------------------------------------------------------------------
 
-def open_source(path, **kwargs) -> FrameSource:
+def open_source(path, decode_threads: int | None = None, **kwargs) -> FrameSource:
     """Open a channel's frames: a ``.pico`` file, a video file or a folder of images.
 
     Parameters
     ----------
     path : str or Path
+    decode_threads : int, optional
+        A ``.pico`` file's decoder threads (:class:`~carapost.io.pico.PicoReader`); other
+        sources ignore it.
     **kwargs
         Passed to the source class (e.g. ``frame_rate`` for a folder).
 
@@ -484,7 +487,7 @@ def open_source(path, **kwargs) -> FrameSource:
     if p.is_dir():
         return ImageFolderSource(p, **kwargs)
     if p.suffix.lower() == ".pico":
-        return PicoSource(p)
+        return PicoSource(p, decode_threads=decode_threads)
     if not os.access(p, os.R_OK):
         raise CaraError("permission denied", p)
     return VideoSource(p, **kwargs)

@@ -297,6 +297,11 @@ class PicoReader:
     verify : bool
         Also check every frame's TS packets and PES header now (reads the
         whole file).
+    decode_threads : int, optional
+        Slice threads of the H.264 decoder (default: two, or one on one core).  One
+        where every core is busy anyway (the workers of Detect Blobs [Active Range],
+        each decoding its own runs of frames): two threads decode a frame ~1.4x
+        sooner but for ~1.2x the CPU.
 
     Attributes
     ----------
@@ -329,9 +334,10 @@ class PicoReader:
         When the file is missing, is not a ``.pico`` file or holds no frames.
     """
 
-    def __init__(self, path: str | os.PathLike, *, verify: bool = False):
+    def __init__(self, path: str | os.PathLike, *, verify: bool = False, decode_threads: int | None = None):
         self.path = Path(path)
         self.warnings: list[str] = []
+        self._decode_threads = decode_threads
         self._lock = threading.RLock()
         self._decoder = None
         self._closed = False
@@ -654,7 +660,7 @@ class PicoReader:
         # threads add a frame of latency per thread), and a seek decoding a GOP run from its
         # I-frame finishes ~1.7x sooner on two cores (measured here: random access p95 50 -> 29 ms).
         ctx.thread_type = "SLICE"
-        ctx.thread_count = max(1, min(2, os.cpu_count() or 1))
+        ctx.thread_count = self._decode_threads or max(1, min(2, os.cpu_count() or 1))
         # CaraLive I-frames are non-IDR; without recovery-point SEI FFmpeg would drop every picture
         # until an IDR unless told to show all.
         ctx.flags2 |= Flags2.show_all
