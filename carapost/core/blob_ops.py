@@ -330,24 +330,32 @@ def detect_media(project, plan, workers: int | None = None, progress: Progress |
     keep_freed_memory()
     workers = workers or default_workers()
     settings = blob_settings(project.properties)
-    tasks = []
-    for s, off, m0, m1 in plan:
-        src = _open(project, s)
-        try:
+    tasks, opened, spare = [], [], {}
+    lock, local, stop = threading.Lock(), threading.local(), threading.Event()
+    try:
+        for s, off, m0, m1 in plan:
+            # Opened here for its keyframes, then the first worker's source of that sensor (a video's
+            # opening demuxes the whole file).
+            src = spare[s] = _open(project, s, decode_threads=1)
+            opened.append(src)
             m0, m1 = max(0, m0), min(m1, src.frame_count)
             tasks += [(s, off, a, b) for a, b in (_runs(src, m0, m1) if m0 < m1 else [])]
-        finally:
+    except BaseException:
+        for src in opened:
             src.close()
-    opened, lock, local, stop = [], threading.Lock(), threading.local(), threading.Event()
+        raise
 
     def source(s):
         cache = getattr(local, "sources", None)
         if cache is None:
             cache = local.sources = {}
         if s not in cache:
-            cache[s] = _open(project, s, decode_threads=1)
             with lock:
-                opened.append(cache[s])
+                cache[s] = spare.pop(s, None)
+            if cache[s] is None:
+                cache[s] = _open(project, s, decode_threads=1)
+                with lock:
+                    opened.append(cache[s])
         return cache[s]
 
     def run(s, off, a, b):
