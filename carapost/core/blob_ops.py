@@ -332,18 +332,6 @@ def detect_media(project, plan, workers: int | None = None, progress: Progress |
     settings = blob_settings(project.properties)
     tasks, opened, spare = [], [], {}
     lock, local, stop = threading.Lock(), threading.local(), threading.Event()
-    try:
-        for s, off, m0, m1 in plan:
-            # Opened here for its keyframes, then the first worker's source of that sensor (a video's
-            # opening demuxes the whole file).
-            src = spare[s] = _open(project, s, decode_threads=1)
-            opened.append(src)
-            m0, m1 = max(0, m0), min(m1, src.frame_count)
-            tasks += [(s, off, a, b) for a, b in (_runs(src, m0, m1) if m0 < m1 else [])]
-    except BaseException:
-        for src in opened:
-            src.close()
-        raise
 
     def source(s):
         cache = getattr(local, "sources", None)
@@ -351,11 +339,12 @@ def detect_media(project, plan, workers: int | None = None, progress: Progress |
             cache = local.sources = {}
         if s not in cache:
             with lock:
-                cache[s] = spare.pop(s, None)
-            if cache[s] is None:
-                cache[s] = _open(project, s, decode_threads=1)
+                src = spare.pop(s, None)
+            if src is None:
+                src = _open(project, s, decode_threads=1)
                 with lock:
-                    opened.append(cache[s])
+                    opened.append(src)
+            cache[s] = src
         return cache[s]
 
     def run(s, off, a, b):
@@ -372,6 +361,13 @@ def detect_media(project, plan, workers: int | None = None, progress: Progress |
 
     cells: dict = {}
     try:
+        for s, off, m0, m1 in plan:
+            # Opened here for its keyframes, then the first worker's source of that sensor (a video's
+            # opening demuxes the whole file).
+            src = spare[s] = _open(project, s, decode_threads=1)
+            opened.append(src)
+            m0, m1 = max(0, m0), min(m1, src.frame_count)
+            tasks += [(s, off, a, b) for a, b in (_runs(src, m0, m1) if m0 < m1 else [])]
         if workers <= 1:
             for t in tasks:
                 cells.update(run(*t))

@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from ..jit import JIT, JIT_EXACT
+from .candidate_kernel import _max_nan
 
 F32 = np.float32
 #: The per-pixel loops' constants as float32: a float64 literal would make numba widen the whole loop.
@@ -616,11 +617,3 @@ def fit_features(logit1, cx, cy, cr, x, y, major, minor, extra, rescued, noise, 
         F[i, 11] = _clip(contrast / _max_nan(light, 1.0), 0.0, 5.0)
         F[i, 12] = _clip(core_std, 0.0, 5.0)
         F[i, 13] = 1.0 if rescued[i] else 0.0
-
-
-@njit(inline="always", **JIT_EXACT)
-def _max_nan(v, lo):
-    """``np.maximum(v, lo)`` of one float64: NaN stays NaN."""
-    if v != v:
-        return v
-    return max(v, lo)
