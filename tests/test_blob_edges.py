@@ -386,6 +386,18 @@ def test_a_detection_twice_the_size_around_a_smaller_one_is_that_dot_with_what_i
     major, minor = np.array([11.0, 29.0, 10.0, 11.0, 20.0]), np.array([5.0, 19.0, 9.0, 5.0, 14.0])
     # The last pair: under twice the size, two fits of one blob (duplicate removal's case, not this rule's).
     assert list(_engulfing(x, y, major, minor)) == [False, True, False, False, False]
+    # The dot 6.4 px off its blob with the highlight (0.67 of its minor semi-axis), as measured on the README take.
+    assert list(_engulfing(np.array([0.0, 6.4]), np.zeros(2), np.array([29.0, 11.0]), np.array([19.0, 5.0]))) == [
+        True, False]
+
+
+def test_a_fragment_on_a_large_dots_rim_does_not_take_its_place():
+    """A large dot (31 x 21 px) and a fragment of its rim found from a level-1 candidate (14 px, 10 px from its
+    centre, 0.95 of its minor semi-axis): the dot is not the fragment measured with what it touches."""
+    from carapost.core.blobs.detector import _engulfing
+
+    got = _engulfing(np.array([0.0, 0.0]), np.array([0.0, 10.0]), np.array([31.0, 14.0]), np.array([21.0, 10.0]))
+    assert list(got) == [False, False]
 
 
 def test_a_black_dot_in_brow_hair_is_measured_from_its_painted_side(monkeypatch):

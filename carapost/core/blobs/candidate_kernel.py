@@ -309,14 +309,15 @@ def profile_radius(F, level, out):
 
 
 @njit(**JIT_EXACT)
-def engulfing(x, y, major, minor, ratio, out):
-    """Mark in ``out`` the points with a point of under ``1 / ratio`` their major axis within half their minor axis.
+def engulfing(x, y, major, minor, ratio, inside, out):
+    """Mark in ``out`` the points with a point of under ``1 / ratio`` their major axis within ``inside`` of their
+    minor semi-axis.
 
     Step 4's dot measured together with what it touches
     (:func:`carapost.core.blobs.detector._engulfing`): of every two points closer
-    than half the largest minor axis, the larger (by ``major``) is marked when its
+    than ``inside`` of the largest minor semi-axis, the larger (by ``major``) is marked when its
     major axis is over ``ratio`` times the other's and the other's centre lies
-    closer than half its own minor axis.  Points are swept in x order.
+    closer than ``inside`` of its own minor semi-axis.  Points are swept in x order.
     """
     n = len(x)
     if n < 2:
@@ -324,7 +325,7 @@ def engulfing(x, y, major, minor, ratio, out):
     reach = 0.0
     for i in range(n):
         reach = max(reach, minor[i])
-    reach = 0.5 * reach
+    reach = 0.5 * inside * reach
     by_x = np.argsort(x)
     for p in range(n):
         i = by_x[p]
@@ -333,7 +334,8 @@ def engulfing(x, y, major, minor, ratio, out):
             if x[j] - x[i] > reach:
                 break
             big, small = (i, j) if major[i] >= major[j] else (j, i)
-            if major[big] > ratio * major[small] and math.hypot(x[big] - x[small], y[big] - y[small]) < 0.5 * minor[big]:
+            if (major[big] > ratio * major[small]
+                    and math.hypot(x[big] - x[small], y[big] - y[small]) < 0.5 * inside * minor[big]):
                 out[big] = True
 
 
