@@ -85,7 +85,7 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
     bright = img if white else cv2.bitwise_not(img)
     noise = fe.noise_sigma(img)
     levels = fe.levels_for(min_major, max_major)
-    # Every level down to the coarsest searched: the coarse candidates are measured on the level above theirs.
+    # Every level down to the coarsest searched: coarse candidates are measured first one octave finer (_fit_coarse).
     pyr = fe.pyramid(bright, list(range(1, max(levels) + 1)))
     work = fe.workspace()
     xs_all, ys_all, lv_all, f_all, thin_all = [], [], [], [], []
@@ -238,7 +238,7 @@ def _fit_coarse(pyramid: dict, bright: np.ndarray, x, y, r0, level, noise: float
     does).
 
     One round (:data:`~.centre.PASSES` solves) on the pyramid level one octave finer than each candidate's, where
-    a pixel is ``sc = 2^(level-1)`` px and the window a quarter of the full-resolution one.  As in
+    a pixel is ``sc = 2^(level-1)`` px and the window holds a quarter of the full-resolution one's pixels.  As in
     :func:`fit_candidates`' first round, an answer farther from its candidate than its semi-major axis (and the
     candidate's radius, and 2 level px) is not ``ok``, and of answers closer than half the larger minor axis only
     the one whose candidate was nearest it (in level px) is.  Then one round (:data:`LEVEL_FIRST_PASSES` solves)
@@ -282,15 +282,13 @@ def _fit_by_level(cand: Candidates, bright: np.ndarray, sel: np.ndarray):
     out = np.zeros((5, n))
     ok = np.zeros(n, bool)
     extra = np.zeros((n, len(MEASURE_NAMES)))
-    for parts, at in ((False, np.flatnonzero(~coarse)), (True, np.flatnonzero(coarse))):
-        if len(at) == 0:
-            continue
-        s = sel[at]
-        if parts:
-            res = _fit_coarse(cand.pyramid, bright, cand.x[s], cand.y[s], cand.radius[s], lv[at].astype(np.int64),
-                              cand.noise)
-        else:
-            res = fit_candidates(bright, cand.x[s], cand.y[s], cand.radius[s], cand.noise)
+    at, s = np.flatnonzero(coarse), sel[coarse]
+    parts = [(at, _fit_coarse(cand.pyramid, bright, cand.x[s], cand.y[s], cand.radius[s], lv[at].astype(np.int64),
+                              cand.noise))]
+    at, s = np.flatnonzero(~coarse), sel[~coarse]
+    if len(at):
+        parts.append((at, fit_candidates(bright, cand.x[s], cand.y[s], cand.radius[s], cand.noise)))
+    for at, res in parts:
         out[:, at] = res[:5]
         ok[at], extra[at] = res[5], res[6]
     return (*out, ok, extra)
