@@ -240,10 +240,11 @@ def _fit_coarse(pyramid: dict, bright: np.ndarray, x, y, r0, level, noise: float
     One round (:data:`~.centre.PASSES` solves) on the pyramid level one octave finer than each candidate's, where
     a pixel is ``sc = 2^(level-1)`` px and the window holds a quarter of the full-resolution one's pixels.  As in
     :func:`fit_candidates`' first round, an answer farther from its candidate than its semi-major axis (and the
-    candidate's radius, and 2 level px) is not ``ok``, and of answers closer than half the larger minor axis only
-    the one whose candidate was nearest it (in level px) is.  Then one round (:data:`LEVEL_FIRST_PASSES` solves)
-    at full resolution, in a window about each ``ok`` answer sized by its major axis, whose stage-2 measurements
-    are the blob's.
+    candidate's radius, and 2 level px) is not ``ok``, nor is one smaller than the sizes its level is for
+    (:func:`.features.level_band`), and of answers closer than half the larger minor axis only the one whose
+    candidate was nearest it (in level px) is.  Then one round (:data:`LEVEL_FIRST_PASSES` solves) at full
+    resolution, in a window about each ``ok`` answer sized by its major axis, whose stage-2 measurements are the
+    blob's.
     """
     n = len(x)
     sc = 2.0 ** (level - 1.0)
@@ -260,6 +261,9 @@ def _fit_coarse(pyramid: dict, bright: np.ndarray, x, y, r0, level, noise: float
     moved = np.hypot(out[0] - lx, out[1] - ly)
     ok &= moved <= np.maximum(np.maximum(0.5 * out[2], lr), 2.0)
     out[:4] *= sc
+    # Smaller than its level is for (semi-major under features.level_band(level)[0] = 2^level px): a dot a finer
+    # level's candidate leads to, which the coarse level's DoG sees too.
+    ok &= 0.5 * out[2] >= 2.0 ** level
     good = np.flatnonzero(ok)
     ok[good] = False
     ok[good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]] = True
@@ -271,11 +275,31 @@ def _fit_coarse(pyramid: dict, bright: np.ndarray, x, y, r0, level, noise: float
     return (*out, ok, extra)
 
 
+def _coarse(cand: Candidates, sel: np.ndarray) -> np.ndarray:
+    """Which of the candidates ``sel`` are measured by :func:`_fit_coarse` (levels from :data:`LEVEL_FIRST` on)."""
+    if cand.pyramid is None:
+        return np.zeros(len(sel), bool)
+    return cand.level[sel] >= LEVEL_FIRST
+
+
+def _one_per_blob(cand: Candidates, sel: np.ndarray, prob1: np.ndarray) -> np.ndarray:
+    """The candidates ``sel`` less those of a blob found on a finer octave (:func:`_suppress`), among the finer
+    levels' and among the coarse levels' (:func:`_coarse`) apart.
+
+    A large dot's coarse candidate lies inside it, and so do finer ones, off its centre, on fragments of its rim
+    or of its inside: the coarse one is measured as well (docs/blobs.md, "Session 32").
+    """
+    coarse = _coarse(cand, sel)
+    keep = [part[_suppress(cand.x[part], cand.y[part], cand.radius[part], prob1[part] - cand.level[part])]
+            for part in (sel[~coarse], sel[coarse]) if len(part)]
+    return np.sort(np.concatenate(keep)) if keep else sel
+
+
 def _fit_by_level(cand: Candidates, bright: np.ndarray, sel: np.ndarray):
     """Steps 3-4 for candidates ``sel``: :func:`fit_candidates` for those of levels finer than
     :data:`LEVEL_FIRST`, :func:`_fit_coarse` for the others.  Returns what :func:`fit_candidates` does."""
     lv = cand.level[sel]
-    coarse = lv >= LEVEL_FIRST if cand.pyramid is not None else np.zeros(len(sel), bool)
+    coarse = _coarse(cand, sel)
     if not coarse.any():
         return fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel], cand.noise)
     n = len(sel)
@@ -479,7 +503,7 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     sel = np.flatnonzero(prob1 >= STAGE1_GATE)
     # One blob is usually a candidate on two or three octaves: fit it once, from the
     # finest octave's candidate (closest to the centre; coarse ones start pixels off).
-    sel = sel[_suppress(cand.x[sel], cand.y[sel], cand.radius[sel], prob1[sel] - cand.level[sel])]
+    sel = _one_per_blob(cand, sel, prob1)
     x, y, major, minor, ang, ok, extra = _fit_by_level(cand, bright, sel)
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     among = weak = None
