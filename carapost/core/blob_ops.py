@@ -445,5 +445,5 @@ def read_blob_parameters_from_pico(project) -> SetProperties:
 
 
 __all__ = ["DetectBlobs", "RemoveUnusedDetections", "blob_preview", "detect_blobs_current_frame",
-           "detect_blobs_range", "detect_frames", "detect_media", "remove_unused_detections", "read_blob_parameters_from_pico",
-]
+           "detect_blobs_range", "detect_frames", "detect_media", "remove_unused_detections",
+           "read_blob_parameters_from_pico"]

@@ -40,10 +40,10 @@ class Candidates:
     radius: np.ndarray     #: half-contrast radius estimate, full-resolution px
     noise: float           #: image noise estimate, grey levels
     feats: np.ndarray      #: (N, F) features
+    #: The "bright blob" image's pyramid, every level down to the coarsest searched (:func:`.features.pyramid`)
+    pyramid: dict
     white: bool = False    #: white blobs (searched on the image) or black (on the inverted image)
     thin: np.ndarray | None = None  #: found by the finest level's narrower DoG only (:func:`.features.thin_candidates`)
-    #: The "bright blob" image's pyramid, every level down to the coarsest searched (:func:`.features.pyramid`)
-    pyramid: dict | None = None
 
 
 def as_grey_u8(image) -> np.ndarray:
@@ -86,7 +86,7 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
     noise = fe.noise_sigma(img)
     levels = fe.levels_for(min_major, max_major)
     # Every level down to the coarsest searched: coarse candidates are measured first one octave finer (_fit_coarse).
-    pyr = fe.pyramid(bright, list(range(1, max(levels) + 1)))
+    pyr = fe.pyramid(bright, max(levels))
     work = fe.workspace()
     xs_all, ys_all, lv_all, f_all, thin_all = [], [], [], [], []
     b = fe.PATCH_R + 1
@@ -126,15 +126,15 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
         lv_all.append(np.full(len(xs), level, np.int8))
     if not f_all:
         z = np.zeros(0)
-        return Candidates(z, z, z.astype(np.int8), z, noise, np.zeros((0, len(fe.FEATURE_NAMES)), np.float32),
-                          bool(white), z.astype(bool), pyr), bright
+        return Candidates(z, z, z.astype(np.int8), z, noise, np.zeros((0, len(fe.FEATURE_NAMES)), np.float32), pyr,
+                          bool(white), z.astype(bool)), bright
     F = np.concatenate(f_all)
     lv = np.concatenate(lv_all)
     # fe.profile_radius(F) * 2.0 ** lv, compiled (the same float32 and float64 arithmetic).
     radius = np.empty(len(F))
     profile_radius(F, lv, radius)
-    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv, radius, noise, F, bool(white),
-                      np.concatenate(thin_all), pyr), bright
+    return Candidates(np.concatenate(xs_all), np.concatenate(ys_all), lv, radius, noise, F, pyr, bool(white),
+                      np.concatenate(thin_all)), bright
 
 
 #: Rounds of measurement; each re-centres the window on the last answer and sizes it by the last major axis.
@@ -196,11 +196,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
             # measurement took it in): it must not win the merge below.
             moved = np.hypot(out[0] - x, out[1] - y)
             ok &= moved <= np.maximum(np.maximum(0.5 * out[2], r0), 2.0)
-            good = np.flatnonzero(ok)
-            # Of one blob's candidates, the one nearest the answer (its window was the best centred).
-            kept = _dedupe(out[0][good], out[1][good], out[3][good], -moved[good])
-            ok[good] = False
-            ok[good[kept]] = True
+            good, kept = _keep_nearest(out, ok, moved)
             dropped = np.ones(len(good), bool)
             dropped[kept] = False
             merged = good[dropped]                  # good less the kept, in order (setdiff1d took 0.08 ms)
@@ -269,9 +265,7 @@ def _fit_coarse(pyramid: dict, bright: np.ndarray, x, y, r0, level, noise: float
     # Smaller than its level is for (semi-major under features.level_band(level)[0] = 2^level px): a dot a finer
     # level's candidate leads to, which the coarse level's DoG sees too.
     ok &= 0.5 * out[2] >= 2.0 ** level
-    good = np.flatnonzero(ok)
-    ok[good] = False
-    ok[good[_dedupe(out[0][good], out[1][good], out[3][good], -moved[good])]] = True
+    _keep_nearest(out, ok, moved)
     todo = np.flatnonzero(ok)
     if len(todo):
         rr = np.clip(GROW * 0.5 * out[2], 1.0, WINDOWS[-1] - BORDER)
@@ -280,32 +274,26 @@ def _fit_coarse(pyramid: dict, bright: np.ndarray, x, y, r0, level, noise: float
     return (*out, ok, extra)
 
 
-def _coarse(cand: Candidates, sel: np.ndarray) -> np.ndarray:
-    """Which of the candidates ``sel`` are measured by :func:`_fit_coarse` (levels from :data:`LEVEL_FIRST` on)."""
-    if cand.pyramid is None:
-        return np.zeros(len(sel), bool)
-    lv = cand.level[sel]
-    return (lv >= LEVEL_FIRST) & (cand.radius[sel] >= COARSE_RADIUS * 2.0 ** lv)
-
-
-def _one_per_blob(cand: Candidates, sel: np.ndarray, prob1: np.ndarray) -> np.ndarray:
+def _one_per_blob(cand: Candidates, sel: np.ndarray, prob1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The candidates ``sel`` less those of a blob found on a finer octave (:func:`_suppress`), among the finer
-    levels' and among the coarse levels' (:func:`_coarse`) apart.
+    levels' and among the coarse levels' apart; and which of them are coarse (measured by :func:`_fit_coarse`:
+    levels from :data:`LEVEL_FIRST` on, radius from :data:`COARSE_RADIUS` of the level's sizes).
 
     A large dot's coarse candidate lies inside it, and so do finer ones, off its centre, on fragments of its rim
     or of its inside: the coarse one is measured as well (docs/blobs.md, "Session 32").
     """
-    coarse = _coarse(cand, sel)
-    keep = [part[_suppress(cand.x[part], cand.y[part], cand.radius[part], prob1[part] - cand.level[part])]
-            for part in (sel[~coarse], sel[coarse]) if len(part)]
-    return np.sort(np.concatenate(keep)) if keep else sel
-
-
-def _fit_by_level(cand: Candidates, bright: np.ndarray, sel: np.ndarray):
-    """Steps 3-4 for candidates ``sel``: :func:`fit_candidates` for those of levels finer than
-    :data:`LEVEL_FIRST`, :func:`_fit_coarse` for the others.  Returns what :func:`fit_candidates` does."""
     lv = cand.level[sel]
-    coarse = _coarse(cand, sel)
+    coarse = (lv >= LEVEL_FIRST) & (cand.radius[sel] >= COARSE_RADIUS * 2.0 ** lv)
+    keep = [part[_suppress(cand.x[part], cand.y[part], cand.radius[part], prob1[part] - cand.level[part])]
+            for part in (sel[~coarse], sel[coarse])]
+    out = np.sort(np.concatenate(keep))
+    return out, np.isin(out, keep[1])
+
+
+def _fit_by_level(cand: Candidates, bright: np.ndarray, sel: np.ndarray, coarse: np.ndarray):
+    """Steps 3-4 for candidates ``sel``: :func:`fit_candidates` for the finer ones, :func:`_fit_coarse` for those
+    ``coarse`` (:func:`_one_per_blob`).  Returns what :func:`fit_candidates` does."""
+    lv = cand.level[sel]
     if not coarse.any():
         return fit_candidates(bright, cand.x[sel], cand.y[sel], cand.radius[sel], cand.noise)
     n = len(sel)
@@ -322,6 +310,19 @@ def _fit_by_level(cand: Candidates, bright: np.ndarray, sel: np.ndarray):
         out[:, at] = res[:5]
         ok[at], extra[at] = res[5], res[6]
     return (*out, ok, extra)
+
+
+def _keep_nearest(out, ok, moved):
+    """The first round's merge (in place): of ``ok`` answers closer than half the larger minor axis (one blob's),
+    only the one whose candidate was nearest its answer (its window was the best centred) stays ``ok``.
+
+    Returns ``(good, kept)``: the ``ok`` ones before, and which of them stay.
+    """
+    good = np.flatnonzero(ok)
+    kept = _dedupe(out[0][good], out[1][good], out[3][good], -moved[good])
+    ok[good] = False
+    ok[good[kept]] = True
+    return good, kept
 
 
 def _unclaimed(first, kx, ky) -> np.ndarray:
@@ -509,8 +510,8 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     sel = np.flatnonzero(prob1 >= STAGE1_GATE)
     # One blob is usually a candidate on two or three octaves: fit it once, from the
     # finest octave's candidate (closest to the centre; coarse ones start pixels off).
-    sel = _one_per_blob(cand, sel, prob1)
-    x, y, major, minor, ang, ok, extra = _fit_by_level(cand, bright, sel)
+    sel, coarse = _one_per_blob(cand, sel, prob1)
+    x, y, major, minor, ang, ok, extra = _fit_by_level(cand, bright, sel, coarse)
     moved = np.hypot(x - cand.x[sel], y - cand.y[sel])
     among = weak = None
     if model.stage2 is not None:

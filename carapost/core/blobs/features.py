@@ -85,14 +85,13 @@ def noise_sigma(img: np.ndarray) -> float:
     return max(0.5, 1.4826 * float(med) / np.sqrt(2.0))
 
 
-def pyramid(bright: np.ndarray, levels: list[int]) -> dict[int, np.ndarray]:
-    """The uint8 images of the requested pyramid levels (level 0 is the input)."""
+def pyramid(bright: np.ndarray, deepest: int) -> dict[int, np.ndarray]:
+    """The uint8 images of pyramid levels ``1 .. deepest`` (level 0 is the input)."""
     out = {}
     cur = bright
-    for level in range(1, max(levels) + 1):
+    for level in range(1, deepest + 1):
         cur = cv2.pyrDown(cur)
-        if level in levels:
-            out[level] = cur
+        out[level] = cur
     return out
 
 
