@@ -156,3 +156,31 @@ def test_one_blob_and_patches_keep_the_depth_their_views_give(quiet):
     assert np.all(p.src[5:10, s0] == SRC_DETECTION)
     assert np.all((p.src[5:10][:, others] == SRC_PATCH).sum(1) >= 2)  # one blob and patches, as on the take
     assert np.all(err < 0.5), err
+
+
+def test_a_patch_above_the_limit_goes_before_a_blob(quiet):
+    """Blobs in cameras 0, 1 and 3, a patch 4 px off in camera 2 (its marker gone from view there).
+
+    The 156-marker black take's Chin_R_11 (frame 77 forwards; patches in cameras 0 and 2, 0.8 and 4 px off):
+    its neighbours' prediction, 2.4 mm off, lay nearest the point left without camera 3's good blob, so that
+    blob went and the point passed 3.1 mm off.  Of the views above the held-out limit a patch goes before
+    any blob.
+    """
+    m = 5
+    T, rig, X, _ = tracker_after(quiet)
+    src = np.full((len(X), rig.S), SRC_DETECTION, np.uint8)
+    src[m, 2] = SRC_PATCH
+    uv = shifted(rig, rig.project(X), m, [2], 4.0)
+    # The prediction where the point is without camera 3: what a biased neighbourhood gave.
+    wrong = triangulate(rig, uv, np.array([[True, True, True, False]] * len(X)))
+    assert np.linalg.norm(wrong[m] - X[m]) > 1.0                        # the premise: that would be a swap
+    pred = X.copy()
+    pred[m] = wrong[m]
+    kept = src.copy()
+    Xc, _ = T._triangulate_clean(rig, uv.copy(), src != SRC_NONE, kept, None, pred)
+    assert kept[m, 2] == SRC_NONE and np.all(kept[m, [0, 1, 3]] == SRC_DETECTION)
+    assert np.linalg.norm(Xc[m] - X[m]) < 0.05
+    # The same views all blobs: the prediction decides, as before (a close pair's good wide view).
+    blobs = np.full_like(src, SRC_DETECTION)
+    T._triangulate_clean(rig, uv.copy(), blobs != SRC_NONE, blobs, None, pred)
+    assert blobs[m, 3] == SRC_NONE
