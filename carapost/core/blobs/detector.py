@@ -598,6 +598,9 @@ THIN_FILL, THIN_ROUND = 0.5, 0.45
 #: full axes of a uniform ellipse of the same second moments, 4 sigma) and the centre moves under
 #: ``THIN_MOVE`` px.
 THIN_SIGMA, THIN_ROUNDER, THIN_MOVE = 1.0, 1.65, 3.0
+#: The fit's window: half-size 0.6 major + 3 px, at least 7 and at most ``THIN_HALF`` (a faint thin dot is 6-10 px
+#: long; a large low-filled blob is no line, and its window would cost as many times more as it has pixels).
+THIN_HALF = 12
 _FILL = FIT_FEATURE_NAMES.index("fill")
 
 
@@ -630,7 +633,7 @@ def _thin_lines(bright: np.ndarray, rec: np.ndarray, fill: np.ndarray, min_major
     if not len(idx):
         return keep
     x, y = rec["x"][idx].astype(np.float64), rec["y"][idx].astype(np.float64)
-    half = np.ceil(np.maximum(0.6 * rec["major"][idx].astype(np.float64), 4.0) + 3.0).astype(np.int64)
+    half = np.ceil(np.clip(0.6 * rec["major"][idx].astype(np.float64), 4.0, THIN_HALF - 3.0) + 3.0).astype(np.int64)
     out = np.empty((len(idx), 8))
     fit_gaussians(bright, x, y, half, out)
     mxx, myy, mxy = out[:, 2], out[:, 3], out[:, 4]
