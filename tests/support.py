@@ -141,3 +141,24 @@ def remove_marker_detection(sc, f, s, m):
     row[row > i] -= 1
     row[m] = -1
     sc.brim_det[f, s][sc.brim_det[f, s] > i] -= 1
+
+
+def supersampled_dot(rng, size: int, angle: float, semi, ss: int = 8):
+    """Where an elliptical dot lies on an ``ss``-times supersampled ``size`` px square, for exact area coverage.
+
+    The dot's centre is drawn within half a pixel of the square's middle; ``semi`` are its semi-axes (px),
+    ``angle`` its major axis's direction (degrees).  Returns the sample grid ``(xx, yy)``, the dot's mask on
+    it, and the true centre; :func:`area_mean` takes an image on that grid down to pixels.
+    """
+    yy, xx = (np.mgrid[0:size * ss, 0:size * ss] + 0.5) / ss - 0.5
+    cx, cy = size / 2 + rng.uniform(-0.5, 0.5), size / 2 + rng.uniform(-0.5, 0.5)
+    t = np.deg2rad(angle)
+    u = (xx - cx) * np.cos(t) + (yy - cy) * np.sin(t)
+    v = -(xx - cx) * np.sin(t) + (yy - cy) * np.cos(t)
+    return xx, yy, (u / semi[0]) ** 2 + (v / semi[1]) ** 2 <= 1, np.array([cx, cy])
+
+
+def area_mean(img: np.ndarray, ss: int = 8) -> np.ndarray:
+    """A supersampled image (:func:`supersampled_dot`) taken down to pixels by the mean of each pixel's samples."""
+    n = img.shape[0] // ss
+    return img.reshape(n, ss, n, ss).mean((1, 3))

@@ -7,6 +7,7 @@ import pytest
 
 from carapost.core.blobs import detect
 from carapost.core.blobs.edges import refine_centres
+from support import area_mean, supersampled_dot
 
 
 def _dot_beside_a_band(rng, gap=2.0, semi=(4.0, 2.5), angle=20.0, band=70.0, size=64):
@@ -15,18 +16,12 @@ def _dot_beside_a_band(rng, gap=2.0, semi=(4.0, 2.5), angle=20.0, band=70.0, siz
     Rendered with exact area coverage (8x8 supersampling), blur 0.8 px and noise 1 grey level.
     Returns the image and the true centre.
     """
-    ss = 8
-    yy, xx = (np.mgrid[0:size * ss, 0:size * ss] + 0.5) / ss - 0.5
-    cx, cy = size / 2 + rng.uniform(-0.5, 0.5), size / 2 + rng.uniform(-0.5, 0.5)
-    t = np.deg2rad(angle)
-    u = (xx - cx) * np.cos(t) + (yy - cy) * np.sin(t)
-    v = -(xx - cx) * np.sin(t) + (yy - cy) * np.cos(t)
+    xx, yy, dot, c = supersampled_dot(rng, size, angle, semi)
     img = np.full(xx.shape, 170.0)
-    img[yy > cy + semi[1] / np.cos(t) + gap] = band
-    img[(u / semi[0]) ** 2 + (v / semi[1]) ** 2 <= 1] = 15.0
-    img = img.reshape(size, ss, size, ss).mean((1, 3))
-    img = cv2.GaussianBlur(img, (0, 0), 0.8) + rng.normal(0, 1.0, (size, size))
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8), np.array([cx, cy])
+    img[yy > c[1] + semi[1] / np.cos(np.deg2rad(angle)) + gap] = band
+    img[dot] = 15.0
+    img = cv2.GaussianBlur(area_mean(img), (0, 0), 0.8) + rng.normal(0, 1.0, (size, size))
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8), c
 
 
 def test_a_dark_band_beside_a_dot_does_not_pull_its_centre():

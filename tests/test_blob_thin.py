@@ -7,6 +7,7 @@ import pytest
 
 from carapost.core.blobs import detector
 from carapost.core.blobs.gauss_kernel import fit_gaussians
+from support import area_mean, supersampled_dot
 
 
 def _line_on_shade(rng, angle, depth=30.0, semi=(3.5, 0.6), size=41, noise=2.0):
@@ -16,17 +17,10 @@ def _line_on_shade(rng, angle, depth=30.0, semi=(3.5, 0.6), size=41, noise=2.0):
     Exact area coverage (8x8 supersampling), blur 0.8 px, ``noise`` grey levels. Returns the image and the true
     centre.
     """
-    ss = 8
-    yy, xx = (np.mgrid[0:size * ss, 0:size * ss] + 0.5) / ss - 0.5
-    cx, cy = size / 2 + rng.uniform(-0.5, 0.5), size / 2 + rng.uniform(-0.5, 0.5)
-    t = np.deg2rad(angle)
-    u = (xx - cx) * np.cos(t) + (yy - cy) * np.sin(t)
-    v = -(xx - cx) * np.sin(t) + (yy - cy) * np.cos(t)
-    skin = 40.0 + 2.5 * (yy - cy) + 0.01 * ((xx - cx) ** 2 + (yy - cy) ** 2)   # the chin's underside
-    img = skin - depth * ((u / semi[0]) ** 2 + (v / semi[1]) ** 2 <= 1)
-    img = img.reshape(size, ss, size, ss).mean((1, 3))
-    img = cv2.GaussianBlur(img, (0, 0), 0.8) + rng.normal(0, noise, (size, size))
-    return 255 - np.clip(np.rint(img), 0, 255).astype(np.uint8), np.array([cx, cy])
+    xx, yy, dot, c = supersampled_dot(rng, size, angle, semi)
+    skin = 40.0 + 2.5 * (yy - c[1]) + 0.01 * ((xx - c[0]) ** 2 + (yy - c[1]) ** 2)   # the chin's underside
+    img = cv2.GaussianBlur(area_mean(skin - depth * dot), (0, 0), 0.8) + rng.normal(0, noise, (size, size))
+    return 255 - np.clip(np.rint(img), 0, 255).astype(np.uint8), c
 
 
 def _fit(img, start, half=8):

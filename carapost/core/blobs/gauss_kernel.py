@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from ..jit import JIT
+from ..linalg_kernel import cholesky_solve
 
 #: Parameters: centre (2), inverse covariance (3), amplitude, plane (3).
 NPAR = 9
@@ -97,34 +98,6 @@ def _normal(J, res, n, JtJ, Jtr):
 
 
 @njit(**JIT)
-def _solve_damped(JtJ, Jtr, lam, step, L):
-    """``step`` = -(JᵀJ + lam diag(JᵀJ))⁻¹ Jᵀr by Cholesky; False when the matrix is not positive definite."""
-    n = NPAR
-    for i in range(n):
-        for j in range(i + 1):
-            s = JtJ[i, j] + (lam * JtJ[i, i] if i == j else 0.0)
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            if i == j:
-                if s <= 0.0:
-                    return False
-                L[i, i] = math.sqrt(s)
-            else:
-                L[i, j] = s / L[j, j]
-    for i in range(n):                       # L z = -Jᵀr
-        s = -Jtr[i]
-        for k in range(i):
-            s -= L[i, k] * step[k]
-        step[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):           # Lᵀ step = z
-        s = step[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * step[k]
-        step[i] = s / L[i, i]
-    return True
-
-
-@njit(**JIT)
 def fit_gaussians(img, xs, ys, halfs, out):
     """Fit the elliptical Gaussian on a plane to each blob's window.
 
@@ -149,6 +122,7 @@ def fit_gaussians(img, xs, ys, halfs, out):
     JtJ = np.empty((NPAR, NPAR))
     Jtr = np.empty(NPAR)
     L = np.zeros((NPAR, NPAR))
+    ridge = np.empty(NPAR)
     most = 1
     for k in range(len(halfs)):
         most = max(most, (2 * halfs[k] + 1) ** 2)
@@ -189,7 +163,9 @@ def fit_gaussians(img, xs, ys, halfs, out):
         _normal(J, res, n, JtJ, Jtr)
         done = False
         for _ in range(ITERATIONS):
-            solved = _solve_damped(JtJ, Jtr, lam, step, L)
+            for i in range(NPAR):
+                ridge[i] = lam * JtJ[i, i]           # Marquardt: the damping scaled by each parameter's curvature
+            solved = cholesky_solve(JtJ, Jtr, ridge, NPAR, L, step)
             if solved:
                 for i in range(NPAR):
                     trial[i] = p[i] + step[i]

@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from ..jit import JIT_EXACT
+from ..linalg_kernel import cholesky_solve
 from .geometry_kernel import rotation_matrices
 
 
@@ -78,36 +79,6 @@ def _normal_equations(K, R, C, X, obs, good, s, huber, H, g):
 
 
 @njit(**JIT_EXACT)
-def _cholesky_solve(H, g, d):
-    """``d = -(H + 1e-9 I)^-1 g`` for a symmetric positive semi-definite ``H`` (6, 6); False if not positive."""
-    n = 6
-    L = np.zeros((n, n))
-    for a in range(n):
-        for b in range(a + 1):
-            acc = H[a, b] + (1e-9 if a == b else 0.0)
-            for c in range(b):
-                acc -= L[a, c] * L[b, c]
-            if a == b:
-                if not acc > 0.0:
-                    return False
-                L[a, a] = np.sqrt(acc)
-            else:
-                L[a, b] = acc / L[b, b]
-    y = np.empty(n)
-    for a in range(n):
-        acc = -g[a]
-        for c in range(a):
-            acc -= L[a, c] * y[c]
-        y[a] = acc / L[a, a]
-    for a in range(n - 1, -1, -1):
-        acc = y[a]
-        for c in range(a + 1, n):
-            acc -= L[c, a] * d[c]
-        d[a] = acc / L[a, a]
-    return True
-
-
-@njit(**JIT_EXACT)
 def refine_rig(K, R, C, X, obs, good, active, iterations, huber):
     """Gauss-Newton on the poses ``R`` (S, 3, 3), ``C`` (S, 3) in place, points ``X`` (N, 3) fixed.
 
@@ -118,6 +89,8 @@ def refine_rig(K, R, C, X, obs, good, active, iterations, huber):
     H = np.empty((6, 6))
     g = np.empty(6)
     d = np.empty(6)
+    L = np.zeros((6, 6))
+    ridge = np.full(6, 1e-9)                  # H is positive semi-definite: a camera seeing too little stays put
     w = np.empty((1, 3))
     Q = np.empty((1, 3, 3))
     Rn = np.empty((3, 3))
@@ -127,7 +100,7 @@ def refine_rig(K, R, C, X, obs, good, active, iterations, huber):
             if not active[s]:
                 continue
             _normal_equations(K, R, C, X, obs, good, s, huber, H, g)
-            if not _cholesky_solve(H, g, d):
+            if not cholesky_solve(H, g, ridge, 6, L, d):
                 continue
             for a in range(6):
                 biggest = max(biggest, abs(d[a]))
