@@ -971,7 +971,8 @@ class FrameTracker(NewPoints):
         camera 3 the worst view held out (4.7 px, the 4 px patch 4.1), and a neighbours' prediction 2.4 mm
         off lay nearest the point without it: the point passed 3.1 mm off.  Where the others do not agree
         (a false blob 9 px off beside a patch 1 px off: the white 35-marker take's Lip_Lower_L with the jaw
-        open), the usual choice stands.
+        open), the usual choice stands.  (With four cameras it acts in the held-out loop's first round only: a
+        later round has three views.)
         """
         out = np.full(len(held), -1)
         cand = np.where((held > limit) & (src == SRC_PATCH), held, -np.inf)
