@@ -923,9 +923,10 @@ class FrameTracker(NewPoints):
             near = np.where((held > limit) & np.isfinite(near), near, np.inf)
             judged = np.isfinite(near).any(1)
             worst = np.where(judged, np.argmin(near, axis=1), worst)
-            # Before any blob, a patch above the limit whose removal leaves the other views agreeing: a patch
+            # Not a blob where a patch above the limit can go and leave the other views agreeing: a patch
             # follows its template over a marker gone from view, and its error shows in the good views' too.
-            first = self._patch_first(rig, uv_c[rows], valid[rows], src[rows], held, limit)
+            first = self._patch_first(rig, uv_c[rows], valid[rows], src[rows], held, limit,
+                                      src[rows, worst] == SRC_DETECTION)
             judged &= first < 0
             worst = np.where(first >= 0, first, worst)
             bad = e > limit
@@ -962,8 +963,9 @@ class FrameTracker(NewPoints):
             again = True
         return X, err
 
-    def _patch_first(self, rig, uv_c, valid, src, held, limit) -> np.ndarray:
-        """For each point, the patch view to drop before any other (-1: none).
+    def _patch_first(self, rig, uv_c, valid, src, held, limit, ask) -> np.ndarray:
+        """For each point where ``ask`` (the held-out test would drop a blob), the patch view to drop instead
+        (-1: none).
 
         That is the patch of largest held-out error above ``limit`` where the other views, three or more,
         all agree within ``limit`` without it.  A grazing chin dot of the 156-marker black take (Chin_R_11,
@@ -977,7 +979,7 @@ class FrameTracker(NewPoints):
         out = np.full(len(held), -1)
         cand = np.where((held > limit) & (src == SRC_PATCH), held, -np.inf)
         k = np.argmax(cand, axis=1)
-        rows = np.flatnonzero(np.isfinite(cand[np.arange(len(held)), k]) & (valid.sum(1) >= 4))
+        rows = np.flatnonzero(ask & np.isfinite(cand[np.arange(len(held)), k]) & (valid.sum(1) >= 4))
         if len(rows) == 0:
             return out
         left = valid[rows].copy()
