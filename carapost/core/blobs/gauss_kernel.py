@@ -23,6 +23,7 @@ from numba import njit
 
 from ..jit import JIT
 from ..linalg_kernel import cholesky_solve
+from .edges import _median
 
 #: Parameters: centre (2), inverse covariance (3), amplitude, plane (3).
 NPAR = 9
@@ -148,10 +149,7 @@ def fit_gaussians(img, xs, ys, halfs, out):
         for iy in range(h):
             for ix in range(w):
                 win[iy * w + ix] = float(img[iy0 + iy, ix0 + ix])
-        for i in range(n):
-            flat[i] = win[i]
-        flat[:n].sort()
-        base = flat[n // 2]
+        base = _median(win[:n], flat)
         cxi = min(max(int(round(xs[k])) - ix0, 0), w - 1)
         cyi = min(max(int(round(ys[k])) - iy0, 0), h - 1)
         inv = 1.0 / (START_SIGMA * START_SIGMA)
