@@ -140,6 +140,8 @@ def test_an_oblique_dots_centre_along_its_major_axis_averages_the_edge_and_the_i
         monkeypatch.setattr(detector, "refine_centres", lambda *a, **kw: refine(*a, **{**kw, "along": along}))
         # Step 5 of the ellipses found from a candidate's edge (its own test, below) calls refine_centres too.
         monkeypatch.setattr(detector, "_refine_edge_ellipses", lambda bright, x, y, *a: (x, y))
+        # Step 7 (the profile along the axis, its own test in test_blob_along.py) comes after and would take over.
+        monkeypatch.setattr(detector, "ALONG_UPTO", 0.0)
         out = {}
         for k, (rec, truth) in _found(frames, white).items():
             e = np.array([rec["x"], rec["y"]], float) - truth

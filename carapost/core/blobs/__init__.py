@@ -51,6 +51,7 @@ def warm_up() -> float:
     import time
 
     from .gauss_kernel import fit_gaussians
+    from .profile_kernel import fit_profiles
     from .synth import disc_image
 
     t = time.perf_counter()
@@ -65,4 +66,7 @@ def warm_up() -> float:
     detect(255 - img, white=True)
     # Step 6 runs only where a faint thin dot was measured round: compile it here, not on such a dot.
     fit_gaussians(img, np.array([30.3]), np.array([30.6]), np.array([6]), np.empty((1, 8)))
+    # Step 7 runs only on elongated dots (these are round).
+    one = np.array([1.0])
+    fit_profiles(img, 30.3 * one, 30.6 * one, 0.0 * one, 8.0 * one, 3.0 * one, np.empty((1, 6)))
     return time.perf_counter() - t

@@ -31,6 +31,7 @@ from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .measure_kernel import fit_features, fit_round, next_round
 from .edges import TRUST, TRUST_TEXTURED, edge_ellipses, refine_centres
 from .gauss_kernel import fit_gaussians
+from .profile_kernel import fit_profiles
 from .model import EDGE_FEATURE_NAMES, FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
 
 
@@ -651,6 +652,29 @@ def _thin_lines(bright: np.ndarray, rec: np.ndarray, fill: np.ndarray, min_major
     return keep
 
 
+#: Elongated dots (docs/blobs.md, step 7): a detection whose minor axis is under ``ALONG_UPTO`` of its major is placed
+#: along its major axis by its profile (:mod:`.profile_kernel`), wholly at ``ALONG_FULL`` and under, in between in
+#: proportion (a blend of the two centres).
+ALONG_FULL, ALONG_UPTO = 0.35, 0.60
+
+
+def _along_profiles(bright: np.ndarray, rec: np.ndarray) -> None:
+    """Move, in place, elongated detections along their major axis to the middle of their profile's segment."""
+    ratio = rec["minor"].astype(np.float64) / np.maximum(rec["major"].astype(np.float64), 1e-6)
+    idx = np.flatnonzero(ratio < ALONG_UPTO)
+    if not len(idx):
+        return
+    a = rec["angle"][idx].astype(np.float64)
+    out = np.empty((len(idx), 6))
+    fit_profiles(bright, rec["x"][idx].astype(np.float64), rec["y"][idx].astype(np.float64), a,
+                 rec["major"][idx].astype(np.float64), rec["minor"][idx].astype(np.float64), out)
+    w = np.clip((ALONG_UPTO - ratio[idx]) / (ALONG_UPTO - ALONG_FULL), 0.0, 1.0)
+    shift = np.where(out[:, 5] > 0, w * 0.5 * (out[:, 0] + out[:, 1]), 0.0)
+    rad = np.radians(a)
+    rec["x"][idx] += shift * np.cos(rad)
+    rec["y"][idx] += shift * np.sin(rad)
+
+
 def detect(image, white: bool = False, threshold: float = 0.4, min_major: float = 4.0, max_major: float = 50.0,
            model: BlobModel | None = None) -> np.ndarray:
     """Detect blobs of one colour in one image.
@@ -711,6 +735,7 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
         # White paint is shaded, not flat: on the white benchmark frames this took 7 detections and moved the
         # centre RMS from 0.1385 to 0.1387 px (docs/blobs.md, "Session 33").
         rec = rec[_thin_lines(bright, rec, fitted.feats[keep, _FILL], min_major, max_major)]
+    _along_profiles(bright, rec)
     # Step 5 may bring two fits of one dot to its centre (an elongated dot's two ends, each measured as a round
     # blob, both refined from the dot's whole edge): one detection.
     rec = rec[_dedupe(rec["x"], rec["y"], rec["minor"], rec["score"])]
