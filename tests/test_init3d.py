@@ -465,13 +465,14 @@ def test_a_one_caddy_point_finds_the_other_caddys_view_along_its_depth():
 def test_a_one_caddy_point_on_a_grown_blob_finds_the_other_caddys_view_along_its_depth():
     """A brow dot's blob grown into the hair in one camera of a caddy, 2.7 px off, put the pair's point
     3.9 mm deep, and the other caddy's blob lay 1.6 px beside the projection of that depth range (the
-    sample's 156 black markers, seed 0, frame 299): the range reaches 5 mm and takes blobs within 1.6 px."""
+    sample's 156 black markers, seed 0, frame 299; 1.74 px since session 34, whose profile step moved that
+    clean blob 0.14 px along its axis): the range reaches 5 mm and takes blobs within 2 px."""
     cams, caddies, xy, pts, sight = _one_caddy_points(4.0)
     Xoff = np.array([d["X"] for d in pts])
-    # Camera 0's blobs 1.3 px beside the projection of each point's line of sight.
+    # Camera 0's blobs 1.8 px beside the projection of each point's line of sight.
     a, b = cams[0].project(Xoff - sight), cams[0].project(Xoff + sight)
     across = np.stack([b[:, 1] - a[:, 1], a[:, 0] - b[:, 0]], axis=1)
-    xy[0] = xy[0] + 1.3 * across / np.linalg.norm(across, axis=1, keepdims=True)
+    xy[0] = xy[0] + 1.8 * across / np.linalg.norm(across, axis=1, keepdims=True)
     right, wrong = _camera_0_views_found(cams, caddies, xy, pts)
     assert wrong == 0 and right >= 20, (right, wrong)
 

@@ -17,8 +17,9 @@ import numpy as np
 #: into the hair, 2.7 px off: its pair lay 3.9 mm deep (the sample's 156 black markers, seed 0, frame 299).
 DEPTH_MM = 5.0
 #: A detection within this distance (px) of the segment is on it: such a grown blob is off across the
-#: epipolar line too (that brow dot's other-caddy blob lay 1.6 px from the segment).
-ALONG_PX = 1.6
+#: epipolar line too (that brow dot's other-caddy blob lay 1.6 px from the segment, and 1.74 px once the
+#: detector's step 7 placed that clean blob 0.14 px along its axis, session 34).
+ALONG_PX = 2.0
 #: No other detection may lie within this distance (px) of the segment.
 ALONG_CLEAR_PX = 4.0
 
