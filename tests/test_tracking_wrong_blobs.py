@@ -395,7 +395,10 @@ def test_a_close_pair_held_off_its_depth_does_not_predict_its_neighbours(quiet, 
     from its marker.  Its firm neighbours were lost; of the two left, the heavier was Jaw_L_7, a close pair
     5.5 mm deep (held near its own firm neighbours later in the same step).  Averaged with the prediction
     Jaw_L_7 made, Chin_C_3 went 3.1 mm off.  A close pair whose depth its firm neighbours put more than
-    ``OFF_DEPTH_VOTE_MM`` away does not vote for points without firm neighbours (``votes``: the rule off)."""
+    ``OFF_DEPTH_VOTE_MM`` away does not vote for points without firm neighbours (``votes``: the rule off).
+    Since session 34 the heavier vote's prediction is no longer certain either: its weight is over half, and
+    the spread that bounds the depth is the other vote's disagreement with it, 3 mm (``elastic.along_spread``);
+    without that, the point moved 1.46 mm towards the heavy vote."""
     from carapost.core.tracking import engine
 
     if votes:
@@ -420,7 +423,7 @@ def test_a_close_pair_held_off_its_depth_does_not_predict_its_neighbours(quiet, 
     out, pred, _ = T._steady_depth(rig, X1, valid, measured, weight)
     moved = np.linalg.norm(out[c] - X[c])
     if votes:
-        assert np.linalg.norm(pred[c] - X[c] - (X1[j] - X[j])) < 0.3 and moved > 1.0, moved   # j's vote
+        assert np.linalg.norm(pred[c] - X[c] - (X1[j] - X[j])) < 0.3 and moved < 0.3, moved   # j's vote, not held to
     else:
         assert not np.all(np.isfinite(pred[c])) and moved < 0.01, moved
 

@@ -358,16 +358,25 @@ def along_spread(X, nb, off, weight, pred, u, rows, use_firm, firm, voting, out)
             w[p] = wk
             m += 1
         total = 0.0
+        heavy = 0.0
         for p in range(m):      # in sorted order, as the cumulative sum below adds them
             total += w[p]
+            heavy = max(heavy, w[p])
         out[q] = 0.0
         if m == 0 or not total > 0.0:
             continue
+        # A vote of half the weight or more is the weighted median alone, and its own deviation (0) would be the
+        # spread whatever the others say: it counts as much as the others together, and the spread is the
+        # first deviation past half.
+        cap = heavy
+        if m > 1 and 2.0 * heavy >= total:
+            cap = total - heavy
+            total = 2.0 * cap
         acc = 0.0
         half = 0
         for p in range(m):
-            acc += w[p]
-            if acc >= 0.5 * total:
+            acc += min(w[p], cap)
+            if acc > 0.5 * total if cap < heavy else acc >= 0.5 * total:
                 half = p
                 break
         s = 1.4826 * dev[half]
