@@ -1,13 +1,14 @@
 """Small dense solves shared by the compiled kernels (the tracker's pose refinement, the blob detector's
-Gaussian fit).  Compiled with ``JIT_EXACT``: a caller compiled with ``fastmath`` does not change this
-arithmetic (numba compiles a called function with its own options)."""
+Gaussian and profile fits).  The solves are compiled with ``JIT_EXACT``: a caller compiled with ``fastmath`` does
+not change their arithmetic (numba compiles a called function with its own options)."""
 from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-from .jit import JIT_EXACT
+from .jit import JIT, JIT_EXACT
 
 
 @njit(**JIT_EXACT)
@@ -39,3 +40,53 @@ def cholesky_solve(H, g, ridge, n, L, d):
             acc -= L[c, a] * d[c]
         d[a] = acc / L[a, a]
     return True
+
+
+@njit(**JIT)
+def normal_equations(J, res, npar, n, JtJ, Jtr):
+    """``JtJ = J Jᵀ`` and ``Jtr = J res`` over the first ``n`` columns of ``J`` (npar, >= n), a Jacobian stored a
+    row per parameter (so that the sums run along contiguous rows).
+
+    Compiled with ``JIT``: its sums may be reordered (vectorised); the blob fits that use it keep float32 answers.
+    """
+    for i in range(npar):
+        s = 0.0
+        for k in range(n):
+            s += J[i, k] * res[k]
+        Jtr[i] = s
+        for j in range(i + 1):
+            s = 0.0
+            for k in range(n):
+                s += J[i, k] * J[j, k]
+            JtJ[i, j] = s
+            JtJ[j, i] = s
+
+
+@njit(**JIT_EXACT)
+def marquardt_step(JtJ, Jtr, lam, npar, ridge, L, step, q, trial):
+    """Levenberg-Marquardt's step for the damping ``lam``: ``JtJ`` with ``lam`` times each parameter's curvature
+    (Marquardt's scaling, plus 1e-12) added to its diagonal, solved by :func:`cholesky_solve` into ``step``
+    (``ridge`` and ``L`` the caller's scratch), and ``trial = q + step``; False if not positive definite."""
+    for i in range(npar):
+        ridge[i] = lam * JtJ[i, i] + 1e-12
+    if not cholesky_solve(JtJ, Jtr, ridge, npar, L, step):
+        return False
+    for i in range(npar):
+        trial[i] = q[i] + step[i]
+    return True
+
+
+@njit(**JIT_EXACT)
+def next_damping(lam, lowered):
+    """Levenberg-Marquardt's damping after a step, and whether the fit ends at a minimum: a third of it after a step
+    that lowered the cost, ten times after one that did not; past 1e8 no step lowers it."""
+    if lowered:
+        return max(lam / 3.0, 1e-9), False
+    return lam * 10.0, lam * 10.0 > 1e8
+
+
+@njit(**JIT_EXACT)
+def lm_scratch(npar):
+    """A Levenberg-Marquardt fit's arrays for ``npar`` parameters: ``(params, trial, step, JtJ, Jtr, L, ridge)``."""
+    return (np.empty(npar), np.empty(npar), np.empty(npar), np.empty((npar, npar)), np.empty(npar),
+            np.zeros((npar, npar)), np.empty(npar))

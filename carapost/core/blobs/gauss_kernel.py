@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from ..jit import JIT
-from ..linalg_kernel import cholesky_solve
+from ..linalg_kernel import lm_scratch, marquardt_step, next_damping, normal_equations
 from .edges import _median
 
 #: Parameters: centre (2), inverse covariance (3), amplitude, plane (3).
@@ -83,22 +83,6 @@ def _jacobian(x0, y0, w, h, p, gau, J):
 
 
 @njit(**JIT)
-def _normal(J, res, n, JtJ, Jtr):
-    """JᵀJ and Jᵀr over the first ``n`` pixels."""
-    for i in range(NPAR):
-        s = 0.0
-        for k in range(n):
-            s += J[i, k] * res[k]
-        Jtr[i] = s
-        for j in range(i + 1):
-            s = 0.0
-            for k in range(n):
-                s += J[i, k] * J[j, k]
-            JtJ[i, j] = s
-            JtJ[j, i] = s
-
-
-@njit(**JIT)
 def fit_gaussians(img, xs, ys, halfs, out):
     """Fit the elliptical Gaussian on a plane to each blob's window.
 
@@ -117,13 +101,7 @@ def fit_gaussians(img, xs, ys, halfs, out):
         positive definite Gaussian brighter than the plane (0.0 otherwise).
     """
     H, W = img.shape
-    p = np.empty(NPAR)
-    trial = np.empty(NPAR)
-    step = np.empty(NPAR)
-    JtJ = np.empty((NPAR, NPAR))
-    Jtr = np.empty(NPAR)
-    L = np.zeros((NPAR, NPAR))
-    ridge = np.empty(NPAR)
+    p, trial, step, JtJ, Jtr, L, ridge = lm_scratch(NPAR)
     most = 1
     for k in range(len(halfs)):
         most = max(most, (2 * halfs[k] + 1) ** 2)
@@ -158,38 +136,27 @@ def fit_gaussians(img, xs, ys, halfs, out):
         lam = DAMPING
         cost = _cost(win, ix0, iy0, w, h, p, res, gau)
         _jacobian(ix0, iy0, w, h, p, gau, J)
-        _normal(J, res, n, JtJ, Jtr)
+        normal_equations(J, res, NPAR, n, JtJ, Jtr)
         done = False
         for _ in range(ITERATIONS):
-            for i in range(NPAR):
-                ridge[i] = lam * JtJ[i, i]           # Marquardt: the damping scaled by each parameter's curvature
-            solved = cholesky_solve(JtJ, Jtr, ridge, NPAR, L, step)
-            if solved:
-                for i in range(NPAR):
-                    trial[i] = p[i] + step[i]
+            solved = marquardt_step(JtJ, Jtr, lam, NPAR, ridge, L, step, p, trial)
             # Only a positive definite Gaussian is a blob.
             if solved and trial[2] > 0.0 and trial[4] > 0.0 and trial[2] * trial[4] > trial[3] * trial[3]:
                 new = _cost(win, ix0, iy0, w, h, trial, res_t, gau_t)
             else:
                 new = math.inf
-            if new < cost:
-                for i in range(NPAR):
-                    p[i] = trial[i]
+            lowered = new < cost
+            if lowered:
+                # The trial's arrays become the fit's (the old ones are the next trial's scratch).
+                p, trial, res, res_t, gau, gau_t = trial, p, res_t, res, gau_t, gau
                 cost = new
-                for i in range(n):
-                    res[i] = res_t[i]
-                    gau[i] = gau_t[i]
                 _jacobian(ix0, iy0, w, h, p, gau, J)
-                _normal(J, res, n, JtJ, Jtr)
-                lam = max(lam / 3.0, 1e-9)
-                if math.hypot(step[0], step[1]) < STILL:
-                    done = True
-                    break
-            else:
-                lam *= 10.0
-                if lam > 1e8:
-                    done = True     # no step lowers the cost: a minimum
-                    break
+                normal_equations(J, res, NPAR, n, JtJ, Jtr)
+            # A step that no longer moves the centre, or no step that lowers the cost: a minimum.
+            lam, done = next_damping(lam, lowered)
+            if done or (lowered and math.hypot(step[0], step[1]) < STILL):
+                done = True
+                break
         det = p[2] * p[4] - p[3] * p[3]
         out[k, 0], out[k, 1] = p[0], p[1]
         if det > 0.0:

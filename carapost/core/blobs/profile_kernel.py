@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from ..jit import JIT
-from ..linalg_kernel import cholesky_solve
+from ..linalg_kernel import lm_scratch, marquardt_step, next_damping, normal_equations
 
 #: Parameters: height, the two ends, the blur, the background's level and slope.
 NPAR = 6
@@ -85,7 +85,7 @@ def _cdf(z, pdf):
 @njit(**JIT)
 def _cost(t, p, n, q, res, phi):
     """Sum of squared residuals of ``q`` over the profile; residuals in ``res``, the two ends' Gaussian
-    densities and the segment's unit profile in ``phi`` (3, n), for :func:`_normal`."""
+    densities and the segment's unit profile in ``phi`` (3, n), for :func:`_jacobian`."""
     a, t1, t2, s, b0, b1 = q[0], q[1], q[2], q[3], q[4], q[5]
     cost = 0.0
     for i in range(n):
@@ -104,8 +104,8 @@ def _cost(t, p, n, q, res, phi):
 
 
 @njit(**JIT)
-def _normal(t, n, q, phi, J, JtJ, Jtr, res):
-    """The Jacobian at ``q`` (rows per parameter) and the normal equations JᵀJ, Jᵀr."""
+def _jacobian(t, n, q, phi, J):
+    """The model's derivatives at ``q`` (``phi``: what :func:`_cost` kept), a row per parameter."""
     a, t1, t2, s = q[0], q[1], q[2], q[3]
     for i in range(n):
         z1 = (t[i] - t1) / s
@@ -116,17 +116,6 @@ def _normal(t, n, q, phi, J, JtJ, Jtr, res):
         J[3, i] = a * (-phi[0, i] * z1 + phi[1, i] * z2) / s
         J[4, i] = 1.0
         J[5, i] = t[i]
-    for r in range(NPAR):
-        acc = 0.0
-        for i in range(n):
-            acc += J[r, i] * res[i]
-        Jtr[r] = acc
-        for c in range(r + 1):
-            acc = 0.0
-            for i in range(n):
-                acc += J[r, i] * J[c, i]
-            JtJ[r, c] = acc
-            JtJ[c, r] = acc
 
 
 @njit(**JIT)
@@ -152,13 +141,7 @@ def fit_profiles(img, xs, ys, angles, majors, minors, out):
     phi = np.empty((3, MOST))
     phi_t = np.empty((3, MOST))
     J = np.empty((NPAR, MOST))
-    q = np.empty(NPAR)
-    trial = np.empty(NPAR)
-    step = np.empty(NPAR)
-    JtJ = np.empty((NPAR, NPAR))
-    Jtr = np.empty(NPAR)
-    L = np.zeros((NPAR, NPAR))
-    ridge = np.empty(NPAR)
+    q, trial, step, JtJ, Jtr, L, ridge = lm_scratch(NPAR)
     for k in range(len(xs)):
         for j in range(6):
             out[k, j] = 0.0
@@ -179,40 +162,29 @@ def fit_profiles(img, xs, ys, angles, majors, minors, out):
         q[0], q[1], q[2], q[3], q[4], q[5] = max(top - p[0], 1.0), -0.4 * majors[k], 0.4 * majors[k], 1.0, p[0], 0.0
         lam = DAMPING
         cost = _cost(t, p, n, q, res, phi)
-        _normal(t, n, q, phi, J, JtJ, Jtr, res)
+        _jacobian(t, n, q, phi, J)
+        normal_equations(J, res, NPAR, n, JtJ, Jtr)
         done = False
         for _ in range(ITERATIONS):
-            for i in range(NPAR):
-                ridge[i] = lam * JtJ[i, i] + 1e-12
-            solved = cholesky_solve(JtJ, Jtr, ridge, NPAR, L, step)
-            if solved:
-                for i in range(NPAR):
-                    trial[i] = q[i] + step[i]
+            solved = marquardt_step(JtJ, Jtr, lam, NPAR, ridge, L, step, q, trial)
             # A segment: brighter than its surround, its ends in order and inside the profile, a blur in bounds.
             if (solved and trial[0] > 0.0 and -half <= trial[1] < trial[2] <= half
                     and BLUR_MIN <= trial[3] <= BLUR_MAX):
                 new = _cost(t, p, n, trial, res_t, phi_t)
             else:
                 new = math.inf
-            if new < cost:
-                for i in range(NPAR):
-                    q[i] = trial[i]
+            lowered = new < cost
+            if lowered:
+                # The trial's arrays become the fit's (the old ones are the next trial's scratch).
+                q, trial, res, res_t, phi, phi_t = trial, q, res_t, res, phi_t, phi
                 cost = new
-                for i in range(n):
-                    res[i] = res_t[i]
-                    phi[0, i] = phi_t[0, i]
-                    phi[1, i] = phi_t[1, i]
-                    phi[2, i] = phi_t[2, i]
-                _normal(t, n, q, phi, J, JtJ, Jtr, res)
-                lam = max(lam / 3.0, 1e-9)
-                if abs(step[1] + step[2]) * 0.5 < STILL:
-                    done = True
-                    break
-            else:
-                lam *= 10.0
-                if lam > 1e8:
-                    done = True     # no step lowers the cost: a minimum
-                    break
+                _jacobian(t, n, q, phi, J)
+                normal_equations(J, res, NPAR, n, JtJ, Jtr)
+            # A step that no longer moves the centre, or no step that lowers the cost: a minimum.
+            lam, done = next_damping(lam, lowered)
+            if done or (lowered and abs(step[1] + step[2]) * 0.5 < STILL):
+                done = True
+                break
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = q[1], q[2], q[3], q[0]
         out[k, 4] = math.sqrt(cost / n)
         out[k, 5] = 1.0 if done else 0.0
