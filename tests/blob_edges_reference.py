@@ -14,8 +14,8 @@ import numpy as np
 
 from scipy.ndimage import map_coordinates
 
-from carapost.core.blobs.edges import (AGAIN, AGAIN_SHRINK, ALONG_MAX, ALONG_ROUND, ALONG_THIN, ARC_MOVE, ARCS, COARSE,
-                                       FLAT, FLAT_MINOR, INLIER, INNER, INSIDE, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS,
+from carapost.core.blobs.edges import (AGAIN, AGAIN_SHRINK, ALONG_MAX, ALONG_ROUND, ALONG_THIN, ARC_MOVE, ARC_MOVE_FLAT,
+                                       ARCS, COARSE, FLAT, FLAT_MINOR, INLIER, INNER, INSIDE, MAX_MOVE, MAX_SCATTER, MERGED, MIN_RAYS,
                                        RAYS, REACH, STEP, TRUST, WEAK)
 
 _T = np.arange(-REACH, REACH + 1e-9, STEP, dtype=np.float32)
@@ -203,7 +203,7 @@ def _fit_edges(gx, gy, x, y, a, b, th, flat_img=None, mode=1):
     dx, dy = x0 * scale, y0 * scale
     n = w.sum(axis=1)
     clean = ok & (n >= MIN_RAYS * RAYS) & (spread < MAX_SCATTER) & (np.hypot(dx, dy) < MAX_MOVE * b)
-    redo = np.flatnonzero(~clean & (np.hypot(dx, dy) > ARC_MOVE))
+    redo = np.flatnonzero(~clean & (np.hypot(dx, dy) > (ARC_MOVE_FLAT if flat_img is not None else ARC_MOVE)))
     if len(redo) and ARCS > 0:
         out = _fit_arcs(u[redo], v[redo], good[redo], scale[redo], b[redo])
         for arr, new in zip((dx, dy, clean, spread, n), out):

@@ -251,12 +251,11 @@ def test_the_kernel_computes_what_the_numpy_reference_does(flat):
     d = np.concatenate(textured)
     assert len(np.unique(np.concatenate(kinds))) == 2
     # (Besides them, one of the two-edged blobs above, 0.13 px apart without the trust, is 0.19 px apart with it
-    # on the frames drawn under perspective; since the arcs are tried from a conic 0.05 px off, not 0.3, session
-    # 34, a second, 0.15 px: the arc each picks differs.)
-    assert np.percentile(d, 95) < 1e-3 and np.count_nonzero(d > 0.06) <= 2, (np.percentile(d, 95), np.sort(d)[-3:])
+    # on the frames drawn under perspective.)
+    assert np.percentile(d, 95) < 1e-3 and np.count_nonzero(d > 0.06) <= 1, (np.percentile(d, 95), np.sort(d)[-3:])
     # detect()'s call: the per-blob trust and the average along elongated blobs' major axes.
     d = np.concatenate(along)
-    assert np.percentile(d, 95) < 1e-3 and np.count_nonzero(d > 0.06) <= 2, (np.percentile(d, 95), np.sort(d)[-3:])
+    assert np.percentile(d, 95) < 1e-3 and np.count_nonzero(d > 0.06) <= 1, (np.percentile(d, 95), np.sort(d)[-3:])
     assert np.count_nonzero(np.concatenate(moved) > 0.01) > 10
 
 
@@ -403,8 +402,7 @@ def test_a_black_dot_in_brow_hair_is_measured_from_its_painted_side(monkeypatch)
     little lighter than its paint.  On the rays through the hair the steepest fall is the hair's outer edge,
     ~2 px beyond the dot's, and the conic through all rays was ~1 px off towards the hair in cameras 0 and
     1, the same way in both, so its 3D point was ~0.5 mm off.  Paint is flat: inside those edge points the
-    level is the hair's, not the dot's, and they are dropped.  (Without that test, since session 34 the best arc
-    of the edge mends one of the four views, 0.20 px; the other three are 0.9-1.2 px off.)"""
+    level is the hair's, not the dot's, and they are dropped."""
     from carapost.core.blobs import detector
     from carapost.sample.render import leds_of, render_view
     from carapost.sample.scene import build_scene, frame_geometry, true_cameras
@@ -429,7 +427,7 @@ def test_a_black_dot_in_brow_hair_is_measured_from_its_painted_side(monkeypatch)
     refine, ellipses = detector.refine_centres, detector.edge_ellipses
     monkeypatch.setattr(detector, "refine_centres", lambda *a, **kw: refine(*a, **{**kw, "flat": False}))
     monkeypatch.setattr(detector, "edge_ellipses", lambda *a, **kw: ellipses(*a, **{**kw, "flat": False}))
-    assert np.sort(errors())[1] > 0.8
+    assert errors().min() > 0.8
 
 
 def test_a_white_lower_lip_dot_grown_into_the_teeth_is_found_from_its_own_edge(monkeypatch):
@@ -491,3 +489,19 @@ def test_a_saturated_white_dot_on_a_highlight_is_found_from_its_own_edge(monkeyp
     assert error() < 0.5
     monkeypatch.setattr(detector, "HELD_BELOW", 0.0)
     assert error() > 1.5
+
+
+def test_a_black_brow_dot_touched_by_hair_takes_its_best_arc_from_a_small_offset():
+    """The benchmark's seed-0 take, frame 0, cameras 0 and 1: `Brow_R_1`'s dot touches the brow's hair on one side.
+    The whole edge is not a clean ellipse, and its conic lies 0.05-0.3 px from the blob: with the arcs tried only
+    beyond 0.3 px (``ARC_MOVE``, as before session 34 and still for white dots) the centre stayed 0.65-0.77 px off
+    towards the hair; black dots try them beyond 0.05 px (``ARC_MOVE_FLAT``), and the best arc is the dot's own."""
+    from carapost.core.blobs.edges import ARC_MOVE, ARC_MOVE_FLAT
+    from carapost.core.blobs.synth import sample_frames
+
+    assert ARC_MOVE_FLAT < ARC_MOVE
+    # (The benchmark's take: its motion is drawn for its 81 frames; a one-frame take's frame 0 differs.)
+    for s in sample_frames(False, seed=0, frames=3, cameras=(0, 1))[:2]:
+        c = s.centres[s.names.index("Brow_R_1")]
+        rec = detect(s.image)
+        assert np.hypot(rec["x"] - c[0], rec["y"] - c[1]).min() < 0.25

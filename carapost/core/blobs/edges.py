@@ -87,10 +87,11 @@ ROUNDS = 3
 #: edge point agrees with an arc's ellipse, px.
 ARCS = 8
 INLIER = 0.35
-#: The arcs are tried only when the whole edge's conic is centred more than this far (px) from the blob.  (0.3 until
-#: session 34: tried from 0.05 px, black centre RMS 0.0868 -> 0.0839 px, its brow dots 0.257 -> 0.228, held out
-#: 0.0972 -> 0.0952; white 0.1195 -> 0.1193, held out 0.1337 -> 0.1327.)
-ARC_MOVE = 0.05
+#: The arcs are tried only when the whole edge's conic is centred more than this far (px) from the blob: white dots
+#: ``ARC_MOVE``, black (flat paint) ``ARC_MOVE_FLAT``.  (0.3 for both until session 34: from 0.05 px black centre RMS
+#: 0.0868 -> 0.0839 px, its brow dots 0.257 -> 0.228, held out 0.0972 -> 0.0952; white 0.1195 -> 0.1193, held out
+#: 0.1337 -> 0.1327, but on the white clutter frames 0.1088 -> 0.1198.)
+ARC_MOVE, ARC_MOVE_FLAT = 0.3, 0.05
 #: With flat paint (black dots), a ray is dropped when the level INSIDE px inside its edge point falls
 #: short of the dot's by FLAT of the edge's height more than the dot's median ray does (0: no test).
 FLAT = 0.05
@@ -638,7 +639,7 @@ def _fit_edge(img, cx, cy, a, b, th, buf, box, arcs=False, flat=0):
     clean = ok and n >= MIN_RAYS * RAYS and spread < MAX_SCATTER and math.hypot(dx, dy) < MAX_MOVE * b
     # A scattered whole edge whose conic is centred where the blob already is confirms that centre;
     # one centred elsewhere may be a dot's outline spoiled on one side.
-    if not clean and arcs and ARCS > 0 and math.hypot(dx, dy) > ARC_MOVE:
+    if not clean and arcs and ARCS > 0 and math.hypot(dx, dy) > (ARC_MOVE_FLAT if flat else ARC_MOVE):
         return _fit_arcs(u, v, peak, lim, a, b, buf)
     return dx, dy, clean, spread, n
 
