@@ -368,15 +368,16 @@ def along_spread(X, nb, off, weight, pred, u, rows, use_firm, firm, voting, out)
         # A vote of half the weight or more is the weighted median alone, and its own deviation (0) would be the
         # spread whatever the others say: it counts as much as the others together, and the spread is the
         # first deviation past half.
-        cap = heavy
-        if m > 1 and 2.0 * heavy >= total:
-            cap = total - heavy
+        capped = m > 1 and 2.0 * heavy >= total
+        cap = total - heavy if capped else heavy
+        if capped:
             total = 2.0 * cap
         acc = 0.0
         half = 0
         for p in range(m):
             acc += min(w[p], cap)
-            if acc > 0.5 * total if cap < heavy else acc >= 0.5 * total:
+            # Capped, the heavy vote reaches half exactly: the median is the next deviation, not its own.
+            if acc > 0.5 * total or (not capped and acc == 0.5 * total):
                 half = p
                 break
         s = 1.4826 * dev[half]
