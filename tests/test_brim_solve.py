@@ -105,3 +105,21 @@ def test_face_seeds_are_labelled_and_point_information():
     assert "Seed_0" in format_point_information(info)
     d = distance_between_points(pr, a.id, b.id, 0)
     assert d["units"] == "mm" and d["distance"] > 0
+
+
+def test_a_seed_for_a_brim_marker_the_brim_lacks_names_it_and_changes_nothing():
+    # Seeds written for another brim (``carapost sample``'s own brim.svg has 20 markers, the default v2.0
+    # 19): the message says which seed, how many markers the brim has, and what to check.
+    sc = make_scene(35, seed=4)
+    pr = sc.project
+    seeds = sc.seeds(n_brim=4)
+    n = len(pr.brim)
+    seeds["brim"][2]["index"] = n
+    d0 = pr.digest()
+    with pytest.raises(CaraError, match=rf"seed brim\[2\] \(brim marker {n}\): the calibration brim has {n} markers "
+                                        rf"\(0-{n - 1}\); is it the brim the take was captured with\?"):
+        apply_seeds(pr, seeds, parts=("brim",))
+    assert pr.digest() == d0
+    pr.brim = None
+    with pytest.raises(CaraError, match=r"seed brim\[0\] .*: no calibration brim is set"):
+        apply_seeds(pr, seeds, parts=("brim",))

@@ -82,9 +82,13 @@ def apply_seeds(project, seeds: dict, parts=("brim", "face")) -> Command:
         for k, e in enumerate(seeds.get("brim", [])):
             idx = int(e["index"])
             what = f"brim[{k}] (brim marker {idx})"
-            if project.brim is None or not 0 <= idx < len(project.brim):
-                n = 0 if project.brim is None else len(project.brim)
-                raise CaraError(f"seed {what}: the calibration brim has {n} markers")
+            if project.brim is None:
+                raise CaraError(f"seed {what}: no calibration brim is set")
+            if not 0 <= idx < len(project.brim):
+                n = len(project.brim)
+                # Seeds written for another brim (a take's own brim.svg against a default one) fail here first.
+                raise CaraError(f"seed {what}: the calibration brim has {n} markers (0-{n - 1}); is it the brim "
+                                f"the take was captured with?")
             brim_entries.append((idx, resolve(e, what)))
     if "face" in parts:
         for k, e in enumerate(seeds.get("face", [])):
