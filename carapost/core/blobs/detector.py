@@ -373,8 +373,12 @@ DRIFT = 1.0
 #: and 34 elsewhere (brow hair, lip creases, the dark outside the face) 0.40-1.0, most under 0.88;
 #: 2.4 moves 0.88 to the default threshold 0.4: 38 of the 43 are kept and 6 of the 34.
 RESCUE_LOGIT = 2.4
-#: A fit that holds its candidate and that stage 2 scores this high is not looked at again.
-RESCUE_ABOVE = 0.9
+#: A fit that holds its candidate and that stage 2 scores this high is not looked at again: white dots
+#: ``RESCUE_ABOVE``, black ``RESCUE_ABOVE_FLAT`` (0.9 for both until session 35: at 0.98 the black held-out frames'
+#: centre RMS went 0.0952 -> 0.0907 px and the black 156-marker tracking runs' 0.0709 / 0.0701 -> 0.0667 / 0.0666 mm,
+#: for no measurable CPU; white's benchmark frames gained a little, but its tracking runs lost, the 100-marker take's
+#: forwards 0.0984 -> 0.1019 mm; docs/blobs.md, "Session 35").
+RESCUE_ABOVE, RESCUE_ABOVE_FLAT = 0.9, 0.98
 #: A grown fit that holds its candidate and has a clean edge of its own is a larger blob the candidate is part
 #: of, unless stage 2 scores it under this (the guide's default threshold): then it is the dot measured with a
 #: bright or dark region around it, and the candidate's own edge is looked for too (a saturated white nose-tip
@@ -523,7 +527,8 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
         # Fits stage 2 already believes, holding their candidate, are not looked at again (the edge
         # search costs ~50 us a candidate; most drifted candidates are coarse octaves' of a clean blob).
         p0 = model.stage2.predict(_fit_features(cand, sel, logit1, x, y, major, minor, extra, np.zeros(len(sel))))
-        among = ~(ok & (p0 >= RESCUE_ABOVE) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
+        above = RESCUE_ABOVE if cand.white else RESCUE_ABOVE_FLAT
+        among = ~(ok & (p0 >= above) & (moved <= np.maximum(DRIFT * cand.radius[sel], 1.5)))
         weak = p0 < HELD_BELOW
     rescued, quality = _rescue_drifted(bright, cand, sel, moved, x, y, major, minor, ang, ok, extra, among, weak)
     # The centre may wander to a neighbour: the candidate must stay inside the blob found.
