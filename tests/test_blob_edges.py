@@ -243,8 +243,9 @@ def test_the_kernel_computes_what_the_numpy_reference_does(flat):
     d = np.concatenate(diffs)
     assert len(d) > 150
     # A few blobs of brow hair or shadow may have two near-equal edges per ray (2 of 255 on these frames with the
-    # dots drawn centred on their projections, 4 of 252 drawn under perspective); the rest agree exactly.
-    assert np.percentile(d, 98) < 1e-3 and np.count_nonzero(d > 0.01) <= 4, (np.percentile(d, 98), np.sort(d)[-5:])
+    # dots drawn centred on their projections, 4 of 252 drawn under perspective; 6 of 266 since session 35, whose
+    # GROWN adds two ellipses found from a candidate's edge, 0.037 px each); the rest agree exactly.
+    assert np.percentile(d, 97) < 1e-3 and np.count_nonzero(d > 0.01) <= 6, (np.percentile(d, 97), np.sort(d)[-7:])
     # With the lower trust of textured skin more blobs move to their edge, and the move's share rises from 0
     # to 1 between one and two noise levels of the fit (~0.02-0.04 px): the reference's sampling (1/32 px)
     # then shows in a few more centres, by hundredths of a pixel.

@@ -88,8 +88,12 @@ def chin_frames():
 
 
 # (camera's index in chin_frames, marker): thin dots 6-7 px long and ~1 px across, 10-15 grey levels darker than the
-# shade they lie in, measured 4.4-7.8 px across and 0.9-1.4 px off by step 3 and step 5.
+# shade they lie in, measured 4.4-7.8 px across and 0.9-1.4 px off by step 3 and step 5 until session 35.  Since then
+# three of them are found from their candidate's own edge first (the black fits stage 2 scores under 0.98 and those
+# grown 1.3 times their candidate are looked at again: docs/blobs.md, "Session 35"), as lines 0.07-0.58 px off, and
+# step 6 measures the fourth.
 _THIN = [(0, "Chin_L_4"), (1, "Jaw_L_3"), (2, "Chin_R_4"), (2, "Cheek_L_11")]
+_STEP6 = [(2, "Chin_R_4")]
 
 
 def _nearest(rec, centre):
@@ -107,8 +111,9 @@ def test_faint_thin_dots_in_the_shade_are_measured_as_lines(chin_frames, monkeyp
         centre = s.centres[s.names.index(name)]
         d_new, r_new = _nearest(new[cam], centre)
         d_old, r_old = _nearest(old[cam], centre)
-        assert d_old > 0.85 and r_old["minor"] > 4.4, name
-        assert d_new < 0.5 and r_new["minor"] < 3.5, name
+        assert d_new < 0.6 and r_new["minor"] < 3.5, name
+        if (cam, name) in _STEP6:
+            assert d_old > 0.85 and r_old["minor"] > 4.4 and d_new < 0.3, name
     # Nothing else moves: the same detections, the rest to the byte.
     for a, b in zip(new, old):
         assert len(a) == len(b)
