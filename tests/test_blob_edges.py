@@ -284,63 +284,57 @@ def test_a_lower_lip_dot_against_the_open_mouth_is_measured_on_its_own():
 
 
 
-def test_a_lip_dot_measured_with_the_band_under_it_is_looked_at_again_though_stage_2_believes_it(monkeypatch):
-    """Frame 40 of the blob benchmark's held-out seed 5 (``sample_frames(seed=5, frames=3)``), camera 0: the lower
-    lip's left dot touches the dark band under the lip.  Measured together with it (12.4 x 5.9 px, 1.32 px low)
-    it holds its candidate and stage 2 scores it 0.94, so until session 35 (0.9 for black dots too) its candidate's
-    own edge was never looked for; now every black fit stage 2 scores under 0.98 (``RESCUE_ABOVE_FLAT``) is looked
-    at again, and the dot's own ellipse (12.8 x 2.95 px) puts it 0.07 px off."""
-    from carapost.core.blobs import detector
+def _offset_of(white: bool, seed: int, camera: int, frame: int, name: str):
+    """A function giving how far ``detect`` puts its nearest detection from marker ``name`` of a blob benchmark
+    frame: ``sample_frames(white, seed=seed, frames=3)``'s frame ``frame`` (0, 40, 80: 0-2) in ``camera``."""
     from carapost.core.blobs.synth import sample_frames
 
-    s = sample_frames(False, seed=5, frames=3, cameras=(0,))[1]
-    u, v = s.centres[s.names.index("Lip_Lower_L")]
+    s = sample_frames(white, seed=seed, frames=3, cameras=(camera,))[frame]
+    u, v = s.centres[s.names.index(name)]
 
     def off():
-        rec = detect(s.image)
+        rec = detect(s.image, white=white)
         return float(np.hypot(rec["x"] - u, rec["y"] - v).min())
 
+    return off
+
+
+def test_a_lip_dot_measured_with_the_band_under_it_is_looked_at_again_though_stage_2_believes_it(monkeypatch):
+    """Frame 40 of the blob benchmark's held-out seed 5, camera 0: the lower lip's left dot touches the dark band
+    under the lip.  Measured together with it (12.4 x 5.9 px, 1.32 px low) it holds its candidate and stage 2 scores
+    it 0.94, so until session 35 (0.9 for black dots too) its candidate's own edge was never looked for; now every
+    black fit stage 2 scores under 0.98 (``RESCUE_ABOVE_FLAT``) is looked at again, and the dot's own ellipse
+    (12.8 x 2.95 px) puts it 0.07 px off."""
+    from carapost.core.blobs import detector
+
+    off = _offset_of(False, 5, 0, 1, "Lip_Lower_L")
     assert off() < 0.2
     monkeypatch.setattr(detector, "RESCUE_ABOVE_FLAT", 0.9)
     assert off() > 1.0
 
 
 def test_a_mouth_corner_dot_grown_into_the_mouth_line_is_measured_from_its_own_edge(monkeypatch):
-    """Frame 40 of the white benchmark's seed 1 (``sample_frames(True, seed=1, frames=3)``), camera 0: the left mouth
-    corner's dot touches the dark line of the lips.  Measured from its candidate it takes in a little of the lit lip
-    beside it (10.8 x 8.9 px, 0.62 px off, where the dot is 8.5 x 5.3): 1.4 times its candidate's radius, under the
-    1.5 that counted as grown until session 35, so its candidate's own edge was not looked for.  At 1.3 (``GROWN``)
-    it is: 8.6 x 5.1 px, 0.05 px off."""
+    """Frame 40 of the white benchmark's seed 1, camera 0: the left mouth corner's dot touches the dark line of the
+    lips.  Measured from its candidate it takes in a little of the lit lip beside it (10.8 x 8.9 px, 0.62 px off,
+    where the dot is 8.5 x 5.3): 1.4 times its candidate's radius, under the 1.5 that counted as grown until
+    session 35, so its candidate's own edge was not looked for.  At 1.3 (``GROWN``) it is: 8.6 x 5.1 px, 0.05 px
+    off."""
     from carapost.core.blobs import detector
-    from carapost.core.blobs.synth import sample_frames
 
-    s = sample_frames(True, seed=1, frames=3, cameras=(0,))[1]
-    u, v = s.centres[s.names.index("Mouth_Corner_L")]
-
-    def off():
-        rec = detect(s.image, white=True)
-        return float(np.hypot(rec["x"] - u, rec["y"] - v).min())
-
+    off = _offset_of(True, 1, 0, 1, "Mouth_Corner_L")
     assert off() < 0.15
     monkeypatch.setattr(detector, "GROWN", 1.5)
     assert off() > 0.5
 
 
 def test_a_saturated_nose_tip_dot_moves_to_its_edge_centre_though_that_is_over_a_pixel_away(monkeypatch):
-    """Frame 80 of the white benchmark's seed 2 (``sample_frames(True, seed=2, frames=3)``), camera 0: the saturated
-    nose-tip dot on the nose's highlight.  Its ellipse, found from its candidate's edge, sits 1.27 px low; measured
-    along its own normals the edge is centred on the dot, and a second pass from there confirms it.  Until session 35
-    a move over 1 px was refused (``EDGE_MOVE``); at 1.3 px it is taken: 0.04 px off."""
+    """Frame 80 of the white benchmark's seed 2, camera 0: the saturated nose-tip dot on the nose's highlight.  Its
+    ellipse, found from its candidate's edge, sits 1.27 px low; measured along its own normals the edge is centred
+    on the dot, and a second pass from there confirms it.  Until session 35 a move over 1 px was refused
+    (``EDGE_MOVE``); at 1.3 px it is taken: 0.04 px off."""
     from carapost.core.blobs import detector
-    from carapost.core.blobs.synth import sample_frames
 
-    s = sample_frames(True, seed=2, frames=3, cameras=(0,))[2]
-    u, v = s.centres[s.names.index("Nose_Tip")]
-
-    def off():
-        rec = detect(s.image, white=True)
-        return float(np.hypot(rec["x"] - u, rec["y"] - v).min())
-
+    off = _offset_of(True, 2, 0, 2, "Nose_Tip")
     assert off() < 0.15
     monkeypatch.setattr(detector, "EDGE_MOVE", 1.0)
     assert off() > 1.0
