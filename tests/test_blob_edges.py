@@ -107,6 +107,48 @@ def test_the_edge_is_trusted_sooner_on_textured_skin_and_not_on_a_flat_surround(
         assert (detector._trust(fitted.feats[ok]) == TRUST).all()
 
 
+@pytest.mark.parametrize("white", [False, True])
+def test_a_large_dot_whose_gradient_lines_miss_each_other_trusts_its_edge_sooner(monkeypatch, white):
+    """Step 3's window about a large dot weighs a wide patch of skin, whose shading pulls the intensity centre
+    even where the ring about the dot fits its plane: a dot longer than LARGE px whose gradient lines miss each
+    other (LINES_APART) moves to its edge's centre from 2 standard errors, as a textured one does.  On generated
+    large-dot frames that lowers the centre RMS; isolated large discs on a flat background, whose lines meet,
+    keep the full trust."""
+    from carapost.core.blobs import detector
+    from carapost.core.blobs.edges import TRUST, TRUST_TEXTURED
+    from carapost.core.blobs.synth import disc_image, match_truth, render
+
+    rng = np.random.default_rng([7, int(white)])
+    frames = [render(rng, 720, 1280, markers=60, white=white, radius=(5.0, 24.0), noise=(1.0, 3.0), confusers=14)
+              for _ in range(3)]
+
+    def rms(texture_only):
+        if texture_only:
+            monkeypatch.setattr(detector, "LARGE", np.inf)
+        e = []
+        for s in frames:
+            r = detector.detect(s.image, white=white)
+            e.append(match_truth(np.stack([r["x"], r["y"]], 1), s)[2])
+        monkeypatch.undo()
+        e = np.concatenate(e)
+        return np.sqrt((e ** 2).sum(1).mean()), len(e)
+
+    shipped, n1 = rms(False)
+    before, n2 = rms(True)
+    assert n1 == n2 > 120 and shipped < 0.97 * before, (shipped, before)
+    for radius in (8.0, 12.0):
+        for _ in range(10):
+            img, c = disc_image(rng, 96, radius, 1.0, 100.0, 60.0 if white else 200.0, 100.0 / 15, dark=not white)
+            img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+            cand, bright = detector.find_candidates(img, white, 4.0, 50.0)
+            fitted = detector.fit_stage(cand, bright, detector.default_model(white))
+            # The disc's own fit (not a fragment of its rim from a finer candidate).
+            disc = np.flatnonzero(fitted.ok & (np.hypot(fitted.x - c[0], fitted.y - c[1]) < 0.5))
+            assert len(disc) and (fitted.major[disc] > detector.LARGE).all()
+            assert (detector._trust(fitted.feats[disc]) == TRUST).all()
+    assert TRUST_TEXTURED < TRUST
+
+
 def _found(frames, white):
     """Per (frame index, marker) that ``detect`` finds within 1.5 px: the detection's record and the true centre."""
     from scipy.spatial import cKDTree

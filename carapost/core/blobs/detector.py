@@ -549,9 +549,17 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
 #: (:data:`.edges.TRUST_TEXTURED`).  Isolated discs on flat backgrounds read 0.7-1.2, face dots 1.1-8 (median
 #: 1.7).
 TEXTURED = 1.5
+#: ... and so is a dot longer than LARGE px (major axis) whose gradient lines miss each other by more than
+#: LINES_APART of its semi-major axis (stage 2's ``line_rms``): step 3's window about a large dot weighs a wide
+#: patch of skin, whose shading pulls the intensity centre though the ring about it fits its plane.  On the
+#: large-dot frames the centre RMS fell 0.1080 -> 0.1013 px (black) and 0.1057 -> 0.0983 (white); isolated discs of
+#: radius 4-12 px, whose lines meet within 0.087 of the radius at signal-to-noise 15, keep the full trust, and their
+#: centres do not change (docs/blobs.md, "Session 36").
+LARGE, LINES_APART = 12.0, 0.1
 
 
 _BORDER, _CNR = FIT_FEATURE_NAMES.index("border_std"), FIT_FEATURE_NAMES.index("log_cnr")
+_MAJOR, _LINES = FIT_FEATURE_NAMES.index("log_major"), FIT_FEATURE_NAMES.index("line_rms")
 
 
 def _edge_quality(q: np.ndarray, extra: np.ndarray, noise: float) -> np.ndarray:
@@ -568,7 +576,8 @@ def _trust(feats: np.ndarray) -> np.ndarray:
     """Step 5's trust in the first centre (:data:`.edges.TRUST`) of fits with stage-2 features ``feats``."""
     # border_std / contrast times contrast / noise: the ring's residual over the image's noise.
     texture = feats[:, _BORDER].astype(np.float64) * np.exp(feats[:, _CNR].astype(np.float64))
-    return np.where(texture > TEXTURED, TRUST_TEXTURED, TRUST)
+    large = (feats[:, _MAJOR] > np.log(LARGE)) & (feats[:, _LINES] > LINES_APART)
+    return np.where((texture > TEXTURED) | large, TRUST_TEXTURED, TRUST)
 
 
 #: An ellipse found from its candidate's edge moves to step 5's centre (measured along its own normals) when
