@@ -72,6 +72,19 @@ def test_a_centre_the_edge_moves_far_is_measured_from_the_edge_again(monkeypatch
     assert max(two) < 0.12 and min(one) > 0.2, (one, two)
 
 
+def _centre_rms(frames, white):
+    """Centre RMS (px) of ``detect``'s hits on ``frames`` (SynthImage) and how many hits."""
+    from carapost.core.blobs import detector
+    from carapost.core.blobs.synth import match_truth
+
+    e = []
+    for s in frames:
+        r = detector.detect(s.image, white=white)
+        e.append(match_truth(np.stack([r["x"], r["y"]], 1), s)[2])
+    e = np.concatenate(e)
+    return np.sqrt((e ** 2).sum(1).mean()), len(e)
+
+
 @pytest.mark.parametrize("white", [False, True])
 def test_the_edge_is_trusted_sooner_on_textured_skin_and_not_on_a_flat_surround(monkeypatch, white):
     """On skin the intensity centre is pulled by the texture and shading around a dot: there (a surround
@@ -80,22 +93,13 @@ def test_the_edge_is_trusted_sooner_on_textured_skin_and_not_on_a_flat_surround(
     keep the full trust, so their centres (near the Cramér-Rao bound) do not change."""
     from carapost.core.blobs import detector
     from carapost.core.blobs.edges import TRUST
-    from carapost.core.blobs.synth import disc_image, match_truth, sample_frames
-
-    def rms(images, everywhere_trust):
-        if everywhere_trust:
-            monkeypatch.setattr(detector, "_trust", lambda F: np.full(len(F), TRUST))
-        e = []
-        for s in images:
-            r = detector.detect(s.image, white=white)
-            e.append(match_truth(np.stack([r["x"], r["y"]], 1), s)[2])
-        monkeypatch.undo()
-        e = np.concatenate(e)
-        return np.sqrt((e ** 2).sum(1).mean()), len(e)
+    from carapost.core.blobs.synth import disc_image, sample_frames
 
     frames = sample_frames(white, seed=0, frames=1)
-    shipped, n1 = rms(frames, False)
-    before, n2 = rms(frames, True)
+    shipped, n1 = _centre_rms(frames, white)
+    monkeypatch.setattr(detector, "_trust", lambda F: np.full(len(F), TRUST))
+    before, n2 = _centre_rms(frames, white)
+    monkeypatch.undo()
     assert n1 >= n2 > 400 and shipped < 0.97 * before, (shipped, before)
     rng = np.random.default_rng(3)
     for _ in range(20):
@@ -116,25 +120,16 @@ def test_a_large_dot_whose_gradient_lines_miss_each_other_trusts_its_edge_sooner
     keep the full trust."""
     from carapost.core.blobs import detector
     from carapost.core.blobs.edges import TRUST, TRUST_TEXTURED
-    from carapost.core.blobs.synth import disc_image, match_truth, render
+    from carapost.core.blobs.synth import disc_image, render
 
     rng = np.random.default_rng([7, int(white)])
     frames = [render(rng, 720, 1280, markers=60, white=white, radius=(5.0, 24.0), noise=(1.0, 3.0), confusers=14)
               for _ in range(3)]
 
-    def rms(texture_only):
-        if texture_only:
-            monkeypatch.setattr(detector, "LARGE", np.inf)
-        e = []
-        for s in frames:
-            r = detector.detect(s.image, white=white)
-            e.append(match_truth(np.stack([r["x"], r["y"]], 1), s)[2])
-        monkeypatch.undo()
-        e = np.concatenate(e)
-        return np.sqrt((e ** 2).sum(1).mean()), len(e)
-
-    shipped, n1 = rms(False)
-    before, n2 = rms(True)
+    shipped, n1 = _centre_rms(frames, white)
+    monkeypatch.setattr(detector, "LARGE", np.inf)
+    before, n2 = _centre_rms(frames, white)
+    monkeypatch.undo()
     assert n1 == n2 > 120 and shipped < 0.97 * before, (shipped, before)
     for radius in (8.0, 12.0):
         for _ in range(10):
