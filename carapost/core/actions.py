@@ -3,9 +3,9 @@
 The main window's menus and context menus, ``carapost shortcuts`` and the tests
 are all generated from :data:`ACTIONS`; nothing else lists menu items or
 shortcuts.  Titles and shortcuts are the Reference Guide's menu tables.  An item
-whose operation does not exist yet has ``available=False`` and a tooltip saying
-which issue brings it: the window shows it disabled, never as a silent no-op.
-A later issue wires it by flipping ``available`` and naming its ``handler``.
+carapost cannot offer (Check For Updates: there is no update service) has
+``available=False`` and a tooltip saying why: the window shows it disabled, never
+as a silent no-op.
 
 This module is Qt-free: shortcuts are Qt "portable text" strings
 (``"Ctrl+Shift+H"``), handlers are dotted names resolved by the GUI.
@@ -85,16 +85,6 @@ class Action:
     def top_menu(self) -> str:
         """The menu-bar menu the item lives under (``"Process"`` for ``"Process > ROM Tools"``)."""
         return self.menu.split(" > ")[0]
-
-
-def _later(what: str, issue: int | None = None) -> str:
-    when = f"issue {issue}" if issue else "a later issue"
-    return f"Not available yet: {what} lands with {when}."
-
-
-def _na(id_: str, menu: str, title: str, what: str, issue: int | None = None, shortcut: str = "", **kw) -> Action:
-    """An item of the guide whose operation is not implemented yet."""
-    return Action(id_, menu, title, shortcut, "", "project", _later(what, issue), available=False, **kw)
 
 
 _A = Action
