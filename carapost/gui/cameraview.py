@@ -17,7 +17,7 @@ from PySide6.QtGui import QColor, QPainterPath, QPalette, QPen, QTransform
 from PySide6.QtWidgets import QFrame, QGraphicsItem, QGraphicsRectItem, QGraphicsSimpleTextItem
 
 from ..core.points import SRC_DETECTION, SRC_KEYFRAME, SRC_NONE, SRC_TARGET
-from . import blobpreview, picking
+from . import blobpreview, keyframe_handles, picking
 from .overlays import (GreyImageItem, HudItem, LabelsItem, boxes, checker_brush, circles, combine, crosses,
                        ellipses, finite, path_item, segments, segments_item, xs)
 
@@ -25,6 +25,7 @@ COLORS = {
     "detection": (255, 45, 45), "point": (60, 150, 255), "connected": (255, 230, 0), "unconnected": (255, 140, 0),
     "error": (255, 230, 0), "selected": (255, 255, 255), "hover": (0, 255, 255), "selected_detection": (90, 255, 90),
     "preview": (255, 0, 255), "keycircle": (255, 230, 0), "measure": (0, 255, 140), "border": (150, 150, 150),
+    "keyregion": (60, 230, 60), "keyhandle": (255, 255, 255),
 }
 #: Screen-pixel sizes of markers that keep their size at any zoom: a projection's circle sits
 #: inside the point's ring, which sits outside its detection's ellipse, so all three show.
@@ -102,6 +103,10 @@ class CameraView(pg.GraphicsView):
             "selected": segments_item(self.content, COLORS["selected"], 2, z=21),
             "selected_sticks": segments_item(self.content, COLORS["selected"], 2, z=21),
             "hover": segments_item(self.content, COLORS["hover"], 2, z=22),
+            # The selected keyframe: its pattern box, comparison region and handles (keyframe_handles).
+            "keybox": segments_item(self.content, COLORS["point"], 1, z=23),
+            "keyregion": segments_item(self.content, COLORS["keyregion"], 1, z=23),
+            "keyhandles": segments_item(self.content, COLORS["keyhandle"], 1, z=24),
             "measure": segments_item(self.content, COLORS["measure"], 2, z=40),
         }
         self.stick_items: dict[tuple, object] = {}
@@ -127,6 +132,8 @@ class CameraView(pg.GraphicsView):
         self.measuring = False
         self._measure_line = None
         self._region: picking.RegionDrag | None = None
+        #: A keyframe handle being dragged: (target, handle kind, the box so far).
+        self._key_drag: tuple | None = None
         self._pixel_text = ""
         self._preview_failed = False
         self._border = ""
@@ -412,7 +419,50 @@ class CameraView(pg.GraphicsView):
         elif not self._flash.isActive():
             self._flash.start()
         self._draw_labels(p, fd, xy, set(rows), hover_row)
+        self._draw_key_handles()
         self._update_info()
+
+    def _draw_key_handles(self) -> None:
+        """The selected point's keyframe in this view: pattern box, comparison region and handles."""
+        t = keyframe_handles.selected_keyframe(self.session, self.sensor)
+        if self._key_drag is not None and t is not None and self._key_drag[0].pid == t.pid:
+            box = self._key_drag[2]
+        elif t is not None:
+            box = t.box
+        else:
+            for name in ("keybox", "keyregion", "keyhandles"):
+                self.items[name].clear()
+            return
+        region, squares = keyframe_handles.shapes(t, box, self.pixel_size())
+        self.items["keybox"].set_shapes(boxes([t.x], [t.y], box[0], box[1]))
+        self.items["keyregion"].set_shapes(region)
+        self.items["keyhandles"].set_shapes(squares)
+
+    def key_handle_at(self, x: float, y: float) -> str | None:
+        """The selected keyframe's handle at raw (x, y) in this view (:mod:`.keyframe_handles`), or None."""
+        t = keyframe_handles.selected_keyframe(self.session, self.sensor)
+        return None if t is None else keyframe_handles.grab(t, x, y, keyframe_handles.GRAB * self.pixel_size())
+
+    def _drag_key_handle(self, ev, start: QPointF, now: QPointF) -> bool:
+        """A drag that took a keyframe handle: the box follows; on release, Edit Keyframe Box (one command)."""
+        from ..core.target_ops import set_keyframe_box
+
+        if ev.isStart():
+            kind = self.key_handle_at(*self.view_to_raw(start))
+            t = keyframe_handles.selected_keyframe(self.session, self.sensor)
+            self._key_drag = None if kind is None else (t, kind, t.box)
+        if self._key_drag is None:
+            return False
+        t, kind, _ = self._key_drag
+        x, y = self.view_to_raw(now)
+        box = keyframe_handles.resized(t.box, kind, x - t.x, y - t.y)
+        self._key_drag = (t, kind, box)
+        if ev.isFinish():
+            self._key_drag = None
+            if box != t.box:
+                self.session.attempt(set_keyframe_box, self.session.project, t.pid, t.frame, [t.sensor], box)
+        self._draw_key_handles()
+        return True
 
     def _draw_labels(self, p, fd, xy, sel_rows: set, hover_row: int) -> None:
         props = p.properties
@@ -554,6 +604,8 @@ class CameraView(pg.GraphicsView):
         if self.measuring:
             self._measure(start, now)
             return True
+        if (ev.isStart() or self._key_drag is not None) and self._drag_key_handle(ev, start, now):
+            return True
         if ev.isStart() or self._region is None:
             self._region = picking.RegionDrag(start, lasso=bool(mods & M.ShiftModifier and mods & M.AltModifier))
         self._region.move(now)
@@ -599,6 +651,10 @@ class CameraView(pg.GraphicsView):
             self._update_info()
             return
         x, y = self._raw_of(ev.pos())
+        if self.key_handle_at(x, y) is not None:
+            self.viewport().setCursor(Qt.CursorShape.SizeAllCursor)
+        else:
+            self.viewport().unsetCursor()
         if ses.display.pixel_report:
             g = ses.loader.pixel(self.sensor, ses.frame, x, y)
             self._pixel_text = f"x {x:.1f}  y {y:.1f}  grey {'-' if g is None else g}"

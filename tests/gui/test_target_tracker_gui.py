@@ -9,7 +9,7 @@ from PySide6.QtCore import Qt
 
 from carapost.core.points import SRC_KEYFRAME, SRC_NONE, SRC_TARGET
 from carapost.gui.target_actions import screen_to_raw
-from guihelpers import click_raw, det_xy, key
+from guihelpers import click_raw, det_xy, drag_raw, key
 
 CTRL, SHIFT = Qt.KeyboardModifier.ControlModifier, Qt.KeyboardModifier.ShiftModifier
 pytestmark = pytest.mark.gui
@@ -175,3 +175,48 @@ def test_the_running_button_pauses_and_keeps_the_frames_done(qtbot, window, take
     win.runner.cancel()
     qtbot.waitUntil(lambda: not win.runner.running, timeout=20000)
     assert p.digest() == before and b.text() == ">"
+
+
+def test_dragging_the_keyframe_handles_resizes_pattern_and_region(qtbot, window, take):
+    """The guide's white handles: a pattern corner sets both pattern half sizes, a cross's arm end one region
+    half size; the region keeps the pattern inside it; each drag is one undoable Edit Keyframe Box."""
+    from carapost.gui import keyframe_handles as kh
+
+    p, _ = take
+    win = window
+    pid = _new_target_track(qtbot, win, p)
+    v1 = win.grid.views[1]
+    q = p.point(pid)
+    x, y = (float(v) for v in q.uv[0, 1])
+    v1.frame_on([(x, y)], margin=30.0)           # a few screen pixels a raw pixel: handles well apart
+    # One move a drag: pyqtgraph drops moves that follow each other within milliseconds, and takes a
+    # press as a drag only once the mouse is 5 screen pixels away from it.
+    names = win.session.doc.stack.names
+    assert q.keyframes[(0, 1)] == (8.0, 8.0, 16.0, 16.0)
+    assert v1.key_handle_at(x + 8, y + 8) == kh.PATTERN and v1.key_handle_at(x + 16, y) == kh.REGION_W
+    assert v1.key_handle_at(x + 3, y + 3) is None
+    # the pattern's corner: both half sizes, whole pixels
+    drag_raw(qtbot, v1, (x + 8, y + 8), (x + 11.2, y + 5.8), steps=1)
+    assert q.keyframes[(0, 1)] == (11.0, 6.0, 16.0, 16.0)
+    assert names()[-1] == "Edit Keyframe Box"
+    assert q.keyframes[(0, 0)] == (8.0, 8.0, 16.0, 16.0)        # the other view's keyframe is its own
+    assert [e.value() for e in win.tracker.box_editors] == [11, 6, 16, 16]
+    # the cross's arm ends: one region half size each (never inside the pattern)
+    drag_raw(qtbot, v1, (x - 16, y), (x - 24.9, y + 2), steps=1)
+    drag_raw(qtbot, v1, (x, y + 16), (x + 1, y + 2), steps=1)
+    assert q.keyframes[(0, 1)] == (11.0, 6.0, 25.0, 6.0)
+    # a pattern dragged past the region takes the region along
+    drag_raw(qtbot, v1, (x + 11, y - 6), (x + 28, y - 9), steps=1)
+    assert q.keyframes[(0, 1)] == (28.0, 9.0, 28.0, 9.0)
+    key(qtbot, win, Qt.Key.Key_Z, CTRL)
+    assert q.keyframes[(0, 1)] == (11.0, 6.0, 25.0, 6.0)
+    key(qtbot, win, Qt.Key.Key_Y, CTRL)
+    assert q.keyframes[(0, 1)] == (28.0, 9.0, 28.0, 9.0)
+    key(qtbot, win, Qt.Key.Key_Z, CTRL)
+    # a drag away from the handles selects as before, and leaves the box alone
+    drag_raw(qtbot, v1, (x - 4, y - 3), (x + 4, y + 3), steps=1)
+    assert q.keyframes[(0, 1)] == (11.0, 6.0, 25.0, 6.0)
+    assert win.session.selection.points == [pid]
+    # no selected point: no handles
+    win.session.select(points=())
+    assert v1.key_handle_at(x + 11, y + 6) is None
