@@ -448,8 +448,9 @@ class CameraView(pg.GraphicsView):
         from ..core.target_ops import set_keyframe_box
 
         if ev.isStart():
-            kind = self.key_handle_at(*self.view_to_raw(start))
             t = keyframe_handles.selected_keyframe(self.session, self.sensor)
+            kind = None if t is None else keyframe_handles.grab(t, *self.view_to_raw(start),
+                                                                 keyframe_handles.GRAB * self.pixel_size())
             self._key_drag = None if kind is None else (t, kind, t.box)
         if self._key_drag is None:
             return False
