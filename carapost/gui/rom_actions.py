@@ -7,7 +7,7 @@ menu's ROM switch on, every camera view draws the loaded ROM frame's points
 where the ROM cameras (as the ROM Tools aligned them) see them, pale blue; a
 plain click on one selects it as the ROM point of Add 2D To ROM
 Correspondence (Ctrl+L), whose other half is the selected detection.
-Display ROM Timebar opens a small window whose slider sets the ROM Frame Index.
+Display ROM Timebar opens the ROM take's timebar in a window of its own (:mod:`.rom_timebar`).
 """
 from __future__ import annotations
 
@@ -15,11 +15,11 @@ import logging
 
 import numpy as np
 from PySide6.QtCore import QEvent, QObject, Qt
-from PySide6.QtWidgets import QDialog, QHBoxLayout, QLabel, QSlider, QSpinBox
 
 from ..core.errors import CaraError
 from .overlays import circles, combine, crosses, segments_item
 from .prompts import CARA_FILTER
+from .rom_timebar import RomTimebar
 
 log = logging.getLogger("carapost")
 
@@ -29,7 +29,6 @@ SELECTED_COLOR = (255, 255, 255)
 #: Half-size of a drawn ROM point and how near (screen px) a click must be to select one.
 ROM_R_PX = 5.0
 PICK_PX = 8.0
-FRAME_INDEX = "initialize_from_rom.rom_frame_index"
 
 
 class RomActions(QObject):
@@ -112,12 +111,12 @@ class RomActions(QObject):
         self.s.attempt(solve_rom_face_alignment_from_correspondences, self.s.project, self.s.frame)
 
     def show_timebar(self) -> None:
-        """Display ROM Timebar: a window whose slider sets the ROM Frame Index."""
+        """Display ROM Timebar: the ROM take's frames in a window; the frame chosen is the ROM Frame Index."""
         from ..core.rom_ops import loaded_rom
 
         state = loaded_rom(self.s.project)
         if self._timebar is None:
-            self._timebar = RomTimebar(self)
+            self._timebar = RomTimebar(self.s, self.w)
         self._timebar.set_rom(state)
         self._timebar.show()
         self._timebar.raise_()
@@ -205,57 +204,3 @@ class RomActions(QObject):
             return False
         self.select_rom_point(int(data["ids"][int(np.argmin(d))]))
         return True
-
-
-class RomTimebar(QDialog):
-    """Display ROM Timebar: the ROM take's frames on a slider; moving it sets the ROM Frame Index."""
-
-    def __init__(self, rom_actions: RomActions):
-        super().__init__(rom_actions.w)
-        self.r = rom_actions
-        self.setWindowTitle("ROM Timebar")
-        self.setWindowFlag(Qt.WindowType.Tool, True)
-        lay = QHBoxLayout(self)
-        self.name = QLabel()
-        self.slider = QSlider(Qt.Orientation.Horizontal)
-        self.slider.setMinimumWidth(400)
-        self.spin = QSpinBox()
-        for w in (self.name, self.slider, self.spin):
-            lay.addWidget(w)
-        self.slider.valueChanged.connect(self.spin.setValue)
-        self.spin.valueChanged.connect(self.slider.setValue)
-        self.slider.sliderReleased.connect(self._commit)
-        self.spin.editingFinished.connect(self._commit)
-        self.r.s.projectChanged.connect(self._sync)
-
-    def set_rom(self, state) -> None:
-        from pathlib import Path
-
-        n = state.rom.frame_count
-        self.name.setText(Path(state.path).name)
-        for w in (self.slider, self.spin):
-            w.setRange(0, n - 1)
-        self._sync()
-
-    def _sync(self) -> None:
-        p = self.r.s.project
-        if p is None:
-            return
-        v = int(p.properties[FRAME_INDEX])
-        for w in (self.slider, self.spin):
-            w.blockSignals(True)
-            w.setValue(v)
-            w.blockSignals(False)
-
-    def set_frame(self, frame: int) -> None:
-        """Set the ROM Frame Index (one undoable edit), as releasing the slider there does."""
-        self.slider.setValue(int(frame))
-        self._commit()
-
-    def _commit(self) -> None:
-        from ..core.edits import SetProperties
-
-        p = self.r.s.project
-        v = int(self.slider.value())
-        if p is not None and int(p.properties[FRAME_INDEX]) != v:
-            self.r.s.run(SetProperties({FRAME_INDEX: v}, name="Set ROM Frame Index"))

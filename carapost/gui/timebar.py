@@ -40,52 +40,22 @@ class Timebar(QWidget):
         p = self.session.project
         return p.view_range if p is not None else (0, 0)
 
-    def _margin(self) -> float:
-        return 6.0
-
     def x_of(self, frame: float) -> float:
-        a, b = self._range()
-        w = self.width() - 2 * self._margin()
-        return self._margin() + (frame - a + 0.5) / max(1, b - a + 1) * w
+        return frame_x(self._range(), self.width(), frame)
 
     def frame_at(self, x: float) -> int:
         """Frame under widget x (clamped to the view range)."""
-        a, b = self._range()
-        w = self.width() - 2 * self._margin()
-        f = a + int(np.floor((x - self._margin()) / max(w, 1) * (b - a + 1)))
-        return max(a, min(b, f))
+        return frame_under(self._range(), self.width(), x)
 
     # ------------------------------------------------------------ painting
     def paintEvent(self, _ev) -> None:
         qp = QPainter(self)
-        qp.fillRect(self.rect(), QColor(45, 45, 45))
         p = self.session.project
         if p is None:
+            qp.fillRect(self.rect(), QColor(45, 45, 45))
             return
-        a, b = p.view_range
-        h = self.height()
-        act = self._ctrl_range or p.active_range
-        x0, x1 = self.x_of(max(act[0], a) - 0.5), self.x_of(min(act[1], b) + 0.5)
-        if x1 > x0:
-            qp.fillRect(QRectF(x0, 2, x1 - x0, h - 4), QColor(70, 95, 140))
-        # ticks: about one labelled tick per 80 px
-        span = b - a + 1
-        step = _nice_step(span * 80 / max(self.width(), 1))
-        qp.setPen(QColor(170, 170, 170))
-        first = int(np.ceil(a / step) * step)
-        for f in range(first, b + 1, step):
-            x = self.x_of(f)
-            qp.drawLine(int(x), h - 10, int(x), h - 2)
-            qp.drawText(int(x) + 2, h - 12, str(f))
-        keys = self._keyframes()
-        qp.setPen(QPen(QColor(255, 255, 255), 1))
-        for f in keys:
-            if a <= f <= b:
-                x = int(self.x_of(f))
-                qp.drawLine(x, 2, x, 10)
-        x = self.x_of(self.session.frame)
-        qp.setPen(QPen(QColor(255, 80, 80), 2))
-        qp.drawLine(int(x), 0, int(x), h)
+        paint_frames(qp, self.width(), self.height(), p.view_range, self.session.frame,
+                     self._ctrl_range or p.active_range, self._keyframes())
 
     def _keyframes(self) -> list[int]:
         ses = self.session
@@ -139,6 +109,51 @@ class Timebar(QWidget):
             steps *= 10
         self.frameRequested.emit(self.session.frame - steps)
         ev.accept()
+
+
+#: Room (px) left and right of the frames.
+MARGIN = 6.0
+
+
+def frame_x(frames: tuple[int, int], width: float, frame: float) -> float:
+    """Widget x of the middle of ``frame`` on a strip ``width`` px wide showing ``frames = (first, last)``."""
+    a, b = frames
+    return MARGIN + (frame - a + 0.5) / max(1, b - a + 1) * (width - 2 * MARGIN)
+
+
+def frame_under(frames: tuple[int, int], width: float, x: float) -> int:
+    """The frame under widget ``x`` (clamped to ``frames``), on a strip as :func:`frame_x` draws it."""
+    a, b = frames
+    f = a + int(np.floor((x - MARGIN) / max(width - 2 * MARGIN, 1) * (b - a + 1)))
+    return max(a, min(b, f))
+
+
+def paint_frames(qp: QPainter, width: int, height: int, frames: tuple[int, int], current: int,
+                 band: tuple[int, int] | None = None, keys=()) -> None:
+    """A timebar: the frames ``(first, last)`` with labelled ticks, the ``band`` of frames highlighted (the
+    active range), ``keys`` as white marks and the ``current`` frame as a red line."""
+    qp.fillRect(0, 0, width, height, QColor(45, 45, 45))
+    a, b = frames
+    x_of = lambda f: frame_x(frames, width, f)   # noqa: E731
+    if band is not None:
+        x0, x1 = x_of(max(band[0], a) - 0.5), x_of(min(band[1], b) + 0.5)
+        if x1 > x0:
+            qp.fillRect(QRectF(x0, 2, x1 - x0, height - 4), QColor(70, 95, 140))
+    # ticks: about one labelled tick per 80 px
+    step = _nice_step((b - a + 1) * 80 / max(width, 1))
+    qp.setPen(QColor(170, 170, 170))
+    for f in range(int(np.ceil(a / step) * step), b + 1, step):
+        x = x_of(f)
+        qp.drawLine(int(x), height - 10, int(x), height - 2)
+        qp.drawText(int(x) + 2, height - 12, str(f))
+    qp.setPen(QPen(QColor(255, 255, 255), 1))
+    for f in keys:
+        if a <= f <= b:
+            x = int(x_of(f))
+            qp.drawLine(x, 2, x, 10)
+    qp.setPen(QPen(QColor(255, 80, 80), 2))
+    x = x_of(current)
+    qp.drawLine(int(x), 0, int(x), height)
 
 
 def _nice_step(raw: float) -> int:

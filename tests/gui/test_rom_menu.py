@@ -8,7 +8,7 @@ from PySide6.QtCore import Qt
 from carapost.core import rom_ops
 from carapost.core.points import BRIM
 from carapost.io.cara import save_project
-from guihelpers import click_raw, key, make_window
+from guihelpers import click_raw, drag_widget, key, make_window
 from rom_support import bare, rom_project, score, take
 
 CTRL = Qt.KeyboardModifier.ControlModifier
@@ -109,11 +109,19 @@ def test_brim_only_and_rom_timebar(qtbot, rom_file):
     for cam, true in zip(p.rig.cameras_at(FRAME), scene.cameras[FRAME]):
         assert np.linalg.norm(cam.position - true.position) < 1.0
 
-    # Display ROM Timebar: its slider sets the ROM Frame Index (one undo step).
+    # Display ROM Timebar: the ROM take's frames in a window; where a click or drag ends is the ROM Frame Index,
+    # one undo step.
     win.action("process.rom_timebar").trigger()
     bar = win.rom._timebar
-    assert bar.isVisible() and bar.slider.maximum() == rom_ops.loaded_rom(p).rom.frame_count - 1
-    bar.set_frame(2)
-    assert p.properties["initialize_from_rom.rom_frame_index"] == 2
+    last = rom_ops.loaded_rom(p).rom.frame_count - 1
+    assert bar.isVisible() and bar.strip.last == last == bar.spin.maximum()
+    n = len(win.session.doc.stack.names())
+    strip = bar.strip
+    drag_widget(strip, [(strip.x_of(0), 10), (strip.x_of(1), 10), (strip.x_of(2), 10)])
+    assert p.properties["initialize_from_rom.rom_frame_index"] == 2 and strip.frame == 2 and bar.spin.value() == 2
+    assert len(win.session.doc.stack.names()) == n + 1
+    assert win.session.doc.stack.names()[-1] == "Set ROM Frame Index"
     key(qtbot, win, Qt.Key.Key_Z, CTRL)
-    assert p.properties["initialize_from_rom.rom_frame_index"] == 0 and bar.slider.value() == 0
+    assert p.properties["initialize_from_rom.rom_frame_index"] == 0 and strip.frame == 0 and bar.spin.value() == 0
+    bar.set_frame(last + 5)                     # past the end: the last frame
+    assert p.properties["initialize_from_rom.rom_frame_index"] == last
