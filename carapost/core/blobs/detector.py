@@ -699,9 +699,11 @@ def _along_profiles(bright: np.ndarray, rec: np.ndarray) -> None:
 #: Black dots (docs/blobs.md, step 8): the centre moves by ``-ε s² / 4`` along each axis of the ellipse, ``ε`` the light's
 #: relative slope along it (:func:`.light_kernel.light_slopes`) and ``s`` the semi-axis, at most ``LIGHT_UPTO`` px: step 3's
 #: centre is pulled towards the light by that much, but a larger dot is placed by its edge (step 5), which the light pulls
-#: less: on the black benchmark frames the final centres' pull along the axis was 2.2 ε for semi-axes of 3.5-5 px and
-#: 1.4 ε over 5 px, where ε a² / 4 is 4.5 and 12.  A cap of 2.5, 3 or 3.5 px took the centre RMS 0.0834 to 0.0783, 0.0784
-#: and 0.0798 px (held out 0.0881 to 0.0827, 0.0827, 0.0839; clutter frames 0.0823 to 0.0769, 0.0757, 0.0750).
+#: less: a blurred edge's gradient peak moves ~2 ε σ² (σ the blur; a 6 x 5 px dot blurred 0.8 px under 3 %/px light: 0.042
+#: px, 2 ε σ² = 0.038), so the cap's 2.25 ε is that pull for σ ~1 px.  On the black benchmark frames the final centres'
+#: pull along the axis was 2.2 ε for semi-axes of 3.5-5 px and 1.4 ε over 5 px, where ε a² / 4 is 4.5 and 12.  A cap of
+#: 2.5, 3 or 3.5 px took the centre RMS 0.0834 to 0.0783, 0.0784 and 0.0798 px (held out 0.0881 to 0.0827, 0.0827, 0.0839;
+#: clutter frames 0.0823 to 0.0769, 0.0757, 0.0750).
 LIGHT_UPTO = 3.0
 #: ... and a slope over ``LIGHT_MAX`` a px is taken as that much: steeper than the light falls, it is something beside the
 #: dot (the face's outline, a brow) that the plane took in.
