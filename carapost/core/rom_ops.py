@@ -605,9 +605,13 @@ def _followers(project: Project, rf: R.RomFrame, cams: list, M: np.ndarray, s: i
     return out
 
 
+#: The property that says which ROM frame Initialize from ROM uses.
+ROM_FRAME_INDEX = "initialize_from_rom.rom_frame_index"
+
+
 def rf_index(project: Project) -> int:
     """The ROM Frame Index property."""
-    return int(project.properties["initialize_from_rom.rom_frame_index"])
+    return int(project.properties[ROM_FRAME_INDEX])
 
 
 def solve_rom_face_alignment_from_correspondences(project: Project, frame: int) -> Command:

@@ -10,15 +10,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QPainter
 from PySide6.QtWidgets import QDialog, QHBoxLayout, QLabel, QSizePolicy, QSpinBox, QWidget
 
-from .timebar import frame_under, frame_x, paint_frames
-
-FRAME_INDEX = "initialize_from_rom.rom_frame_index"
-
+from ..core.rom_ops import ROM_FRAME_INDEX, rf_index
+from .timebar import frame_under, frame_x, paint_frames, wheel_steps
 
 class RomFrameStrip(QWidget):
     """The ROM take's frames ``0 .. last``; ``frameChosen`` when a click, drag or wheel step ends on a frame."""
@@ -61,9 +58,7 @@ class RomFrameStrip(QWidget):
             self.frameChosen.emit(self.frame)
 
     def wheelEvent(self, ev) -> None:
-        steps = int(np.sign(ev.angleDelta().y() or ev.angleDelta().x())) * (
-            10 if ev.modifiers() & Qt.KeyboardModifier.ShiftModifier else 1)
-        self.frame = max(0, min(self.last, self.frame - steps))
+        self.frame = max(0, min(self.last, self.frame - wheel_steps(ev)))
         self.update()
         self.frameChosen.emit(self.frame)
         ev.accept()
@@ -98,7 +93,7 @@ class RomTimebar(QDialog):
         p = self.session.project
         if p is None:
             return
-        v = int(p.properties[FRAME_INDEX])
+        v = rf_index(p)
         self.strip.set_frames(self.strip.last, v)
         self.spin.blockSignals(True)
         self.spin.setValue(v)
@@ -110,6 +105,6 @@ class RomTimebar(QDialog):
 
         p = self.session.project
         v = max(0, min(self.strip.last, int(frame)))
-        if p is not None and int(p.properties[FRAME_INDEX]) != v:
-            self.session.run(SetProperties({FRAME_INDEX: v}, name="Set ROM Frame Index"))
+        if p is not None and rf_index(p) != v:
+            self.session.run(SetProperties({ROM_FRAME_INDEX: v}, name="Set ROM Frame Index"))
         self._sync()
