@@ -196,6 +196,27 @@ def test_dog_peaks_of_a_plateau_keep_every_pixel():
     assert [len(a) for a in ck.dog_peaks(g[:10], s[:10], np.float32(0.6), 5)] == [0] * 5
 
 
+@pytest.mark.parametrize("width", [11, 12, 13, 17, 18, 21, 26, 29])
+def test_dog_peaks_on_rows_of_every_length(width):
+    # The search reads its row mask 8 pixels at a time: rows whose searched part is not a multiple of 8 long,
+    # maxima in the last pixels searched and ties must come out as the numpy version's.
+    rng = np.random.default_rng(width)
+    g = rng.normal(0.0, 1.0, (23, width)).astype(np.float32)
+    s = rng.normal(0.0, 0.3, (23, width)).astype(np.float32)
+    g[6:9, width - 6:width - 3] = 3.0                   # a plateau: ties
+    for border in (2, 3, 5):
+        gb = g.copy()
+        gb[15, width - border - 1] = 10.0               # a maximum in the last column searched
+        ys, xs, v, ox, oy = ck.dog_peaks(gb, s, np.float32(0.2), border)
+        want = maxima_reference(gb - s, np.float32(0.2), border)
+        np.testing.assert_array_equal(ys, want[0])
+        np.testing.assert_array_equal(xs, want[1])
+        assert (15, width - border - 1) in zip(ys.tolist(), xs.tolist())
+        np.testing.assert_array_equal(v, (gb - s)[ys, xs])
+        for a, b in zip((ox, oy), subpixel_reference(gb - s, ys, xs)):
+            np.testing.assert_array_equal(a, b)
+
+
 def test_workspace_arrays_follow_the_image_size():
     work = fe.Workspace()
     a = work.image("x", (4, 5))
