@@ -440,7 +440,10 @@ class CameraView(pg.GraphicsView):
 
     def key_handle_at(self, x: float, y: float) -> str | None:
         """The selected keyframe's handle at raw (x, y) in this view (:mod:`.keyframe_handles`), or None."""
-        t = keyframe_handles.selected_keyframe(self.session, self.sensor)
+        return self._key_handle(keyframe_handles.selected_keyframe(self.session, self.sensor), x, y)
+
+    def _key_handle(self, t, x: float, y: float) -> str | None:
+        """The handle of keyframe ``t`` (None: no keyframe) within grabbing reach of raw (x, y), or None."""
         return None if t is None else keyframe_handles.grab(t, x, y, keyframe_handles.GRAB * self.pixel_size())
 
     def _drag_key_handle(self, ev, start: QPointF, now: QPointF) -> bool:
@@ -449,8 +452,7 @@ class CameraView(pg.GraphicsView):
 
         if ev.isStart():
             t = keyframe_handles.selected_keyframe(self.session, self.sensor)
-            kind = None if t is None else keyframe_handles.grab(t, *self.view_to_raw(start),
-                                                                 keyframe_handles.GRAB * self.pixel_size())
+            kind = self._key_handle(t, *self.view_to_raw(start))
             self._key_drag = None if kind is None else (t, kind, t.box)
         if self._key_drag is None:
             return False

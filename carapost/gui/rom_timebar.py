@@ -17,6 +17,7 @@ from PySide6.QtWidgets import QDialog, QHBoxLayout, QLabel, QSizePolicy, QSpinBo
 from ..core.rom_ops import ROM_FRAME_INDEX, rf_index
 from .timebar import frame_under, frame_x, paint_frames, wheel_steps
 
+
 class RomFrameStrip(QWidget):
     """The ROM take's frames ``0 .. last``; ``frameChosen`` when a click, drag or wheel step ends on a frame."""
 
@@ -86,7 +87,7 @@ class RomTimebar(QDialog):
         """Show the frames of the loaded ROM ``state`` (:func:`carapost.core.rom_ops.loaded_rom`)."""
         self.name.setText(Path(state.path).name)
         self.spin.setRange(0, state.rom.frame_count - 1)
-        self.strip.last = state.rom.frame_count - 1
+        self.strip.set_frames(state.rom.frame_count - 1, self.strip.frame)
         self._sync()
 
     def _sync(self) -> None:
