@@ -24,3 +24,16 @@ def pytest_sessionstart(session):
 @pytest.fixture
 def project():
     return make_project()
+
+
+@pytest.fixture
+def steps_1_to_8():
+    """Detections without step 9 (the learned centre correction, whose own tests are test_blob_centre_net.py):
+    the tests of steps 1-8 look at what their own step does to the centres.  (Not through ``monkeypatch``: those
+    tests undo their own patches midway.)"""
+    from carapost.core.blobs import detector
+
+    before = detector.LEARNED_CENTRES
+    detector.LEARNED_CENTRES = False
+    yield
+    detector.LEARNED_CENTRES = before

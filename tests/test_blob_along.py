@@ -9,6 +9,8 @@ from carapost.core.blobs import detector
 from carapost.core.blobs.profile_kernel import CORE_MIN, CORE_SHARE, STEP_ACROSS, STEP_ALONG, fit_profiles
 from support import area_mean, supersampled_dot
 
+pytestmark = pytest.mark.usefixtures("steps_1_to_8")
+
 
 def _white_line(rng, angle, semi=(4.0, 0.8), height=40.0, size=41, noise=0.0, slope=3.0):
     """A white dot seen obliquely on skin whose light rises along the dot's axis, as a camera sees it.

@@ -9,6 +9,8 @@ from carapost.core.blobs import detect
 from carapost.core.blobs.edges import refine_centres
 from support import area_mean, supersampled_dot
 
+pytestmark = pytest.mark.usefixtures("steps_1_to_8")
+
 
 def _dot_beside_a_band(rng, gap=2.0, semi=(4.0, 2.5), angle=20.0, band=70.0, size=64):
     """A black elliptical dot on lit skin, a darker band (a lip line) ``gap`` px below its edge.

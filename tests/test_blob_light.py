@@ -9,6 +9,8 @@ from carapost.core.blobs import detector
 from carapost.core.blobs.light_kernel import light_slopes
 from support import area_mean, supersampled_dot
 
+pytestmark = pytest.mark.usefixtures("steps_1_to_8")
+
 
 def _slopes(img, x, y, major, minor, angle):
     out = np.full((len(x), 2), np.nan)

@@ -9,6 +9,8 @@ from carapost.core.blobs import detector
 from carapost.core.blobs.gauss_kernel import fit_gaussians
 from support import area_mean, supersampled_dot
 
+pytestmark = pytest.mark.usefixtures("steps_1_to_8")
+
 
 def _line_on_shade(rng, angle, depth=30.0, semi=(3.5, 0.6), size=41, noise=2.0):
     """A thin dark dot (edge-on paint) on skin whose shade slopes and curves, inverted (blobs bright) as the

@@ -19,6 +19,14 @@ stage is a one-hidden-layer tanh network fitted with full-batch Adam on the
 class-balanced logistic loss.  Everything is seeded: the same command gives
 the same weights.
 
+With ``--centre-scenes N`` the **centre stage** (step 9, ``carapost.core.blobs.centre_net``) is trained
+too: every detection (steps 1-8, the classifier just trained or, with ``--centre-only``, the one in
+``--out``) within 1.5 px of a marker of the generated images, of N sample-take scenes more (seeds 3000
+and up; a tenth as many jaw-open ones) and of N generated images of large dots is an example; its inputs are the grey levels on the grid about
+it and its target is how far its centre is off, along and across its ellipse.  The network (64 tanh
+units, linear output) is fitted with minibatch Adam on the squared error, each example seen in its four
+mirror images (the grid flipped along either axis, the target's sign with it).
+
 Usage::
 
     python tools/train_blob_model.py [--images 160] [--scenes 3] [--jaw-scenes 0] [--grazing 0] [--edge-scenes 0]
@@ -27,6 +35,10 @@ Usage::
 The shipped edge stages (session 28) were made, over the shipped stages 1 and 2, with::
 
     python tools/train_blob_model.py --images 200 --edge-scenes 30 --edge-fpr 0.5 --edge-only --seed 5
+
+and the shipped centre stages (session 39), over the shipped stages 1, 2 and edge, with::
+
+    python tools/train_blob_model.py --images 200 --centre-scenes 200 --centre-only --seed 5
 """
 from __future__ import annotations
 
@@ -39,8 +51,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from carapost.core.blobs.detector import (RESCUE_LOGIT, _refine_edge_ellipses, as_grey_u8, find_candidates,  # noqa: E402
-                                         fit_stage)
+from carapost.core.blobs.centre_net import GRID, CentreNet, centre_inputs  # noqa: E402
+from carapost.core.blobs.detector import (RESCUE_LOGIT, _refine_edge_ellipses, as_grey_u8, detect,  # noqa: E402
+                                         find_candidates, fit_stage)
+from carapost.core.blobs.features import noise_sigma  # noqa: E402
 from carapost.core.blobs.model import MLP, BlobModel  # noqa: E402
 from carapost.core.blobs.synth import render, render_grazing, sample_frames  # noqa: E402
 
@@ -199,6 +213,124 @@ def edge_examples(data, white: bool, model: BlobModel):
 AT = np.log(0.4 / 0.6)
 
 
+def centre_takes(white: bool, scenes: int, seed: int):
+    """Frames of ``carapost sample`` takes for the centre stage: ``scenes`` scenes of 3 frames x 4 cameras and a
+    tenth as many jaw-open ones (2 frames x 4 cameras), seeds from 3000 (never the benchmark's or the other
+    stages'); 35-160 face markers, varied noise and blur."""
+    rng = np.random.default_rng([seed, int(white), 17])
+    out = []
+    for k in range(scenes):
+        out += sample_frames(white, seed=3000 + 10 * seed + k, frames=3, step=37,
+                             markers=int(rng.integers(35, 160)), noise=float(rng.uniform(1.0, 4.0)),
+                             blur=float(rng.uniform(0.5, 1.2)))
+    for k in range(scenes // 10):
+        out += sample_frames(white, seed=3000 + 10 * seed + scenes + k, jaw_open=2,
+                             markers=int(rng.integers(35, 160)), noise=float(rng.uniform(1.0, 4.0)),
+                             blur=float(rng.uniform(0.5, 1.2)))
+    return out
+
+
+def large_images(white: bool, n_images: int, seed: int):
+    """Generated images of large dots (semi-axes 5-24 px) for the centre stage: the sample takes' face dots are
+    3-7 px, and a network that had seen few larger ones moved their centres the wrong way."""
+    rng = np.random.default_rng([seed, int(white), 19])
+    return [render(rng, 360, 480, markers=12, white=white, radius=(5.0, 24.0), confusers=int(rng.integers(3, 14)))
+            for _ in range(n_images)]
+
+
+def centre_examples(data, white: bool, model: BlobModel, tol: float = 1.5):
+    """The centre stage's examples: inputs (:func:`~carapost.core.blobs.centre_net.centre_inputs`) of every
+    detection (steps 1-8) within ``tol`` px of a visible marker, and its centre's error (detected less true, px)
+    along and across its ellipse's major axis."""
+    from scipy.spatial import cKDTree
+
+    X, Y = [], []
+    for s in data:
+        img = as_grey_u8(s.image)
+        rec = detect(img, white=white, model=model, learned_centres=False)
+        if len(rec) == 0 or len(s.centres) == 0:
+            continue
+        d, j = cKDTree(np.column_stack([rec["x"], rec["y"]]).astype(np.float64)).query(s.centres)
+        # One detection per marker, the nearest; a detection nearest two markers serves the nearer.
+        best = {}
+        for k in np.flatnonzero(d <= tol):
+            if j[k] not in best or d[k] < d[best[j[k]]]:
+                best[j[k]] = k
+        if not best:
+            continue
+        det = np.array(list(best.keys()))
+        mk = np.array(list(best.values()))
+        r = rec[det]
+        bright = img if white else 255 - img
+        inputs, _ = centre_inputs(bright, r["x"], r["y"], r["major"], r["minor"], r["angle"], noise_sigma(img))
+        e = np.column_stack([r["x"], r["y"]]).astype(np.float64) - s.centres[mk]
+        th = np.deg2rad(r["angle"].astype(np.float64))
+        co, si = np.cos(th), np.sin(th)
+        X.append(inputs)
+        Y.append(np.column_stack([e[:, 0] * co + e[:, 1] * si, -e[:, 0] * si + e[:, 1] * co]))
+    return np.concatenate(X), np.concatenate(Y).astype(np.float32)
+
+
+def _mirrored(X: np.ndarray, Y: np.ndarray):
+    """``X``, ``Y`` and their three mirror images: the grid flipped along the major axis, across it, and both
+    (the error's component along the flipped axis changes sign)."""
+    grid = X[:, :GRID * GRID].reshape(-1, GRID, GRID)       # rows: across (v), columns: along (u)
+    xs, ys = [], []
+    for fu in (1, -1):
+        for fv in (1, -1):
+            xs.append(np.hstack([grid[:, ::fv, ::fu].reshape(len(X), -1), X[:, GRID * GRID:]]))
+            ys.append(Y * np.array([fu, fv], np.float32))
+    return np.concatenate(xs), np.concatenate(ys)
+
+
+def train_centre(X: np.ndarray, Y: np.ndarray, seed: int, hidden: int = 64, epochs: int = 40,
+                 batch: int = 512, lr: float = 2e-3, decay: float = 1e-4) -> CentreNet:
+    """The centre stage: minibatch Adam on the squared error of a one-hidden-layer tanh network (learning
+    rate on a cosine from ``lr`` to 0 over ``epochs``), on the examples and their mirror images."""
+    X, Y = _mirrored(X, Y)
+    rng = np.random.default_rng(seed)
+    mean = X.mean(0)
+    std = X.std(0) + 1e-6
+    Z = ((X - mean) / std).astype(np.float32)
+    n, d = Z.shape
+    params = [(rng.standard_normal((d, hidden)) / np.sqrt(d)).astype(np.float32), np.zeros(hidden, np.float32),
+              (rng.standard_normal((hidden, 2)) * 0.01).astype(np.float32), np.zeros(2, np.float32)]
+    m = [np.zeros_like(p) for p in params]
+    v = [np.zeros_like(p) for p in params]
+    t = 0
+    for ep in range(epochs):
+        order = rng.permutation(n)
+        step = lr * 0.5 * (1.0 + np.cos(np.pi * ep / epochs))
+        for s in range(0, n, batch):
+            idx = order[s:s + batch]
+            z, y = Z[idx], Y[idx]
+            W1, c1, W2, c2 = params
+            H = np.tanh(z @ W1 + c1)
+            err = H @ W2 + c2 - y
+            gW2 = H.T @ err / len(idx)
+            gH = (err @ W2.T) * (1.0 - H * H)
+            grads = (z.T @ gH / len(idx) + decay * W1, gH.mean(0), gW2, err.mean(0))
+            t += 1
+            for k, g in enumerate(grads):
+                m[k] = 0.9 * m[k] + 0.1 * g
+                v[k] = 0.999 * v[k] + 0.001 * g * g
+                params[k] = (params[k] - step * (m[k] / (1 - 0.9 ** t)) / (np.sqrt(v[k] / (1 - 0.999 ** t)) + 1e-8)
+                             ).astype(np.float32)
+    return CentreNet(mean.astype(np.float32), std.astype(np.float32), *params)
+
+
+def _centre_stage(model: BlobModel, white: bool, a) -> CentreNet:
+    """Train the centre stage for ``model`` (``--centre-scenes``) and report it."""
+    data = images(white, a.images, a.seed) + centre_takes(white, a.centre_scenes, a.seed)
+    data += large_images(white, a.centre_scenes, a.seed)
+    X, Y = centre_examples(data, white, model)
+    net = train_centre(X, Y, a.seed + 3)
+    after = Y - net.error(X)
+    print(f"centre stage: {len(Y)} detections, centre RMS on them {np.sqrt((Y ** 2).sum(1).mean()):.4f} -> "
+          f"{np.sqrt((after ** 2).sum(1).mean()):.4f} px (before the texture gate)")
+    return net
+
+
 def rule_keeps(model: BlobModel, F: np.ndarray) -> np.ndarray:
     """Which edge ellipses of stage-2 features ``F`` the rule keeps at the default threshold: stage 2's logit
     less ``RESCUE_LOGIT`` (what detection scores them by without an edge stage)."""
@@ -304,6 +436,11 @@ def main(argv=None) -> int:
                          "rule it stands beside (stage 2 less RESCUE_LOGIT)")
     ap.add_argument("--edge-only", action="store_true",
                     help="keep the stages 1 and 2 in --out and (re)train only the edge stage")
+    ap.add_argument("--centre-scenes", type=int, default=0,
+                    help="train the centre stage too, on the detections of the generated images and of this many "
+                         "sample-take scenes more per colour (0: no centre stage)")
+    ap.add_argument("--centre-only", action="store_true",
+                    help="keep the other stages in --out and (re)train only the centre stage")
     ap.add_argument("--colour", choices=("both", "black", "white"), default="both",
                     help="train one colour's weights only (the other's file is left as it is)")
     ap.add_argument("--seed", type=int, default=5)
@@ -318,6 +455,13 @@ def main(argv=None) -> int:
             model.edge = _edge_stage(model, white, a)
             model.save(path)
             print(f"{name}: edge stage only; {time.time() - t:.0f} s -> {path}")
+            continue
+        if a.centre_only:
+            model = BlobModel.load(path)
+            model.centre = None
+            model.centre = _centre_stage(model, white, a)
+            model.save(path)
+            print(f"{name}: centre stage only; {time.time() - t:.0f} s -> {path}")
             continue
         data = images(white, a.images, a.seed) + sample_takes(white, a.scenes, a.seed)
         data += jaw_takes(white, a.jaw_scenes, a.seed)
@@ -335,6 +479,8 @@ def main(argv=None) -> int:
         p1, p2 = model.stage1.predict(F1), model.stage2.predict(F2)
         if a.edge_scenes:
             model.edge = _edge_stage(model, white, a)
+        if a.centre_scenes:
+            model.centre = _centre_stage(model, white, a)
         model.save(path)
         print(f"{name}: stage 1 {len(Y1)} candidates ({int(Y1.sum())} blobs) recall {(p1[Y1 > 0.5] >= 0.05).mean():.4f} "
               f"at the gate; stage 2 {len(Y2)} fits ({int(Y2.sum())} blobs) recall {(p2[Y2 > 0.5] >= 0.4).mean():.4f}, "

@@ -148,6 +148,10 @@ PROPERTY_TABLE: tuple[PropertyDef, ...] = (
        "Probability above which a black blob is detected: lower finds more."),
     _P("blob", "white_threshold", "White Threshold", float, 0.4, 0.0, 1.0, "",
        "Probability above which a white blob is detected: lower finds more."),
+    _P("blob", "learned_centres", "Learned Centre Correction", bool, True,
+       help="Correct each blob's centre by what the classifier's centre stage reads in the skin around it "
+            "(trained on generated faces; step 9 of docs/blobs.md). Off: the centre from the dot's own edge "
+            "and intensities."),
     # Initialize 3D Parameters
     _P("initialize_3d", "max_allowed_depth", "Max Allowed Depth", float, 35.0, 0.0, 1000, "mm",
        "Largest 3D distance of a new point from an existing one during Initialize 3D."),

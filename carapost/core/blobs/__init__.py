@@ -22,7 +22,8 @@ def blob_settings(properties) -> list[dict]:
         if properties[f"blob.find_{colour}_blobs"]:
             out.append({"white": white, "threshold": float(properties[f"blob.{colour}_threshold"]),
                         "min_major": float(properties[f"blob.{colour}_min_radius"]),
-                        "max_major": float(properties[f"blob.{colour}_max_radius"])})
+                        "max_major": float(properties[f"blob.{colour}_max_radius"]),
+                        "learned_centres": bool(properties["blob.learned_centres"])})
     return out
 
 

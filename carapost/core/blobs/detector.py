@@ -14,8 +14,9 @@ The four steps of the guide's "Blob detection algorithm":
 
 Our additions: the centre from the dot's painted edge (:mod:`.edges`, step 5),
 faint thin black dots measured as lines (:mod:`.gauss_kernel`, step 6), elongated
-dots placed along their axis by their profile (:mod:`.profile_kernel`, step 7), and
-black dots' centres taken back from the light's slope (:mod:`.light_kernel`, step 8).
+dots placed along their axis by their profile (:mod:`.profile_kernel`, step 7),
+black dots' centres taken back from the light's slope (:mod:`.light_kernel`, step 8), and
+a learned correction of the centres on textured skin (:mod:`.centre_net`, step 9).
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ from ..heap import keep_freed_memory
 from . import features as fe
 from .candidate_kernel import LEVEL_SCALE, apart, engulfing, greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
+from .centre_net import corrected_centres
 from .measure_kernel import fit_features, fit_round, next_round
 from .edges import TRUST, TRUST_TEXTURED, edge_ellipses, refine_centres
 from .gauss_kernel import fit_gaussians
@@ -718,8 +720,13 @@ def _light_corrected(img: np.ndarray, rec: np.ndarray) -> None:
     rec["x"], rec["y"] = x, y
 
 
+#: Step 9 (:mod:`.centre_net`) when :func:`detect` is not told (the Blob Parameter ``blob.learned_centres`` tells
+#: it).  The tests of steps 1-8 turn it off to see their own step's centres.
+LEARNED_CENTRES = True
+
+
 def detect(image, white: bool = False, threshold: float = 0.4, min_major: float = 4.0, max_major: float = 50.0,
-           model: BlobModel | None = None) -> np.ndarray:
+           model: BlobModel | None = None, learned_centres: bool | None = None) -> np.ndarray:
     """Detect blobs of one colour in one image.
 
     Parameters
@@ -735,6 +742,9 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
         guide's Min/Max Radius: "the length of the longest axis").
     model : BlobModel, optional
         Classifier; the shipped one for the colour by default.
+    learned_centres : bool, optional
+        Step 9: correct the centres by the model's centre stage (:mod:`.centre_net`), where it has one
+        (default :data:`LEARNED_CENTRES`).
 
     Returns
     -------
@@ -786,5 +796,9 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     # Step 5 may bring two fits of one dot to its centre (an elongated dot's two ends, each measured as a round
     # blob, both refined from the dot's whole edge): one detection.
     rec = rec[_dedupe(rec["x"], rec["y"], rec["minor"], rec["score"])]
+    if learned_centres is None:
+        learned_centres = LEARNED_CENTRES
+    if learned_centres and model.centre is not None and len(rec):
+        rec["x"], rec["y"] = corrected_centres(bright, rec, cand.noise, model.centre)
     order = np.lexsort((rec["x"], rec["y"]))
     return rec[order]

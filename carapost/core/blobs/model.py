@@ -15,6 +15,8 @@ intensity measurement having been drawn off it), which the **edge stage**, a thi
 trained on such ellipses alone, scores from the same features, stage 2's logit and how the edge
 looked (:data:`EDGE_FEATURE_NAMES`: how far its points scatter about the ellipse, how many of the
 rays found it, how strong it is against the noise and the blob's contrast, and its weakest ray).
+A fourth network, the **centre stage** (:class:`~.centre_net.CentreNet`, step 9), reads how far each
+kept detection's centre is off from the grey levels about it.
 
 Weights live in ``resources/blob_model_{black,white}.npz`` and are produced by
 ``tools/train_blob_model.py`` (deterministic seed).  Evaluation is a few small
@@ -29,6 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import CaraError
+from . import centre_net
+from .centre_net import CentreNet
 from .features import FEATURE_NAMES
 
 RESOURCE_DIR = Path(__file__).resolve().parents[3] / "resources"
@@ -84,6 +88,8 @@ class BlobModel:
     #: features and logit and the edge's own features (:meth:`edge_features`, :meth:`score`); None: stage 2
     #: less :data:`.detector.RESCUE_LOGIT` alone.
     edge: MLP | None = None
+    #: Step 9's correction of the kept detections' centres (:mod:`.centre_net`); None: none.
+    centre: CentreNet | None = None
 
     def save(self, path) -> None:
         arrays = self.stage1.arrays("s1_")
@@ -91,6 +97,9 @@ class BlobModel:
             arrays.update(self.stage2.arrays("s2_"))
         if self.edge is not None:
             arrays.update(self.edge.arrays("se_"))
+        if self.centre is not None:
+            arrays.update(self.centre.arrays("sc_"))
+            arrays["centre_grid"] = np.array([centre_net.GRID, centre_net.MARGIN, centre_net.N_INPUTS], np.float64)
         np.savez(path, feature_names=np.array(FEATURE_NAMES), fit_feature_names=np.array(FIT_FEATURE_NAMES),
                  edge_feature_names=np.array(EDGE_FEATURE_NAMES), **arrays)
 
@@ -106,9 +115,16 @@ class BlobModel:
         if names != FEATURE_NAMES or (fit_names and fit_names != FIT_FEATURE_NAMES) or (
                 "se_w1" in z and edge_names != EDGE_FEATURE_NAMES):
             raise CaraError(f"{path}: blob model was trained on other features; run tools/train_blob_model.py")
+        centre = None
+        if "sc_w1" in z:
+            grid = tuple(float(v) for v in z["centre_grid"]) if "centre_grid" in z else ()
+            if grid != (centre_net.GRID, centre_net.MARGIN, centre_net.N_INPUTS):
+                raise CaraError(f"{path}: the blob model's centre stage was trained on another grid; "
+                                "run tools/train_blob_model.py --centre-only")
+            centre = CentreNet.from_arrays(z, "sc_")
         s2 = MLP.from_arrays(z, "s2_") if "s2_w1" in z else None
         se = MLP.from_arrays(z, "se_") if "se_w1" in z else None
-        return cls(MLP.from_arrays(z, "s1_"), s2, se)
+        return cls(MLP.from_arrays(z, "s1_"), s2, se, centre)
 
     def edge_features(self, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
         """The edge stage's inputs: stage 2's features ``F``, stage 2's logit of them and how the edge
