@@ -87,11 +87,16 @@ def sample_takes(white: bool, scenes: int, seed: int):
     hair, and taught stage 1 that hair is a dot) nor negatives.
     """
     rng = np.random.default_rng([seed, int(white), 7])
+    return _scenes(white, 1000 + 10 * seed, scenes, rng, (60, 160), frames=3, step=37)
+
+
+def _scenes(white: bool, first: int, count: int, rng, markers: tuple, **kw):
+    """``count`` sample-take scenes of seeds ``first`` on (``sample_frames(**kw)``), each with a number of face
+    markers in ``markers`` and a noise of 1-4 and a blur of 0.5-1.2, drawn from ``rng`` in that order."""
     out = []
-    for k in range(scenes):
-        out += sample_frames(white, seed=1000 + 10 * seed + k, frames=3, step=37,
-                             markers=int(rng.integers(60, 160)), noise=float(rng.uniform(1.0, 4.0)),
-                             blur=float(rng.uniform(0.5, 1.2)))
+    for k in range(count):
+        out += sample_frames(white, seed=first + k, markers=int(rng.integers(*markers)),
+                             noise=float(rng.uniform(1.0, 4.0)), blur=float(rng.uniform(0.5, 1.2)), **kw)
     return out
 
 
@@ -104,11 +109,7 @@ def jaw_takes(white: bool, scenes: int, seed: int):
     benchmark's); 35-160 face markers.
     """
     rng = np.random.default_rng([seed, int(white), 11])
-    out = []
-    for k in range(scenes):
-        out += sample_frames(white, seed=2000 + 10 * seed + k, jaw_open=2, markers=int(rng.integers(35, 160)),
-                             noise=float(rng.uniform(1.0, 4.0)), blur=float(rng.uniform(0.5, 1.2)))
-    return out
+    return _scenes(white, 2000 + 10 * seed, scenes, rng, (35, 160), jaw_open=2)
 
 
 def grazing_images(white: bool, n_images: int, seed: int):
@@ -218,16 +219,9 @@ def centre_takes(white: bool, scenes: int, seed: int):
     tenth as many jaw-open ones (2 frames x 4 cameras), seeds from 3000 (never the benchmark's or the other
     stages'); 35-160 face markers, varied noise and blur."""
     rng = np.random.default_rng([seed, int(white), 17])
-    out = []
-    for k in range(scenes):
-        out += sample_frames(white, seed=3000 + 10 * seed + k, frames=3, step=37,
-                             markers=int(rng.integers(35, 160)), noise=float(rng.uniform(1.0, 4.0)),
-                             blur=float(rng.uniform(0.5, 1.2)))
-    for k in range(scenes // 10):
-        out += sample_frames(white, seed=3000 + 10 * seed + scenes + k, jaw_open=2,
-                             markers=int(rng.integers(35, 160)), noise=float(rng.uniform(1.0, 4.0)),
-                             blur=float(rng.uniform(0.5, 1.2)))
-    return out
+    first = 3000 + 10 * seed
+    return (_scenes(white, first, scenes, rng, (35, 160), frames=3, step=37)
+            + _scenes(white, first + scenes, scenes // 10, rng, (35, 160), jaw_open=2))
 
 
 def large_images(white: bool, n_images: int, seed: int):
