@@ -74,14 +74,14 @@ WIDE_VIEW_MM = 0.5
 PATCH_WEIGHT = 0.2
 #: Held-out view errors above this many robust standard deviations of the frame's are mismatches...
 HELD_OUT_SIGMAS = 8.0
+#: ...but never below this (px), so that a frame of perfect data does not reject sub-pixel noise.
+HELD_OUT_FLOOR_PX = 1.0
 #: After the held-out test's first round a view is dropped only where that brings the point nearer its neighbours'
 #: prediction, unless its held-out error is over this many times Max Allowed 2D Projection Error: a good wide
 #: view held out against a close pair misses by the pair's depth error, about 3 px for each of its pixels, and
 #: on the rendered takes such views missed by 5-9 px (the black 35-marker take: dropped at 1 times, its
 #: `Eyelid_R_Lower` went 0.23 mm off and the take's RMS 0.033 -> 0.051 mm); a stray blob missed by 11.7.
 FAR_HELD_OUT = 2.0
-#: ...but never below this (px), so that a frame of perfect data does not reject sub-pixel noise.
-HELD_OUT_FLOOR_PX = 1.0
 #: A two-blob point's view this many times farther from the projection of the neighbours' prediction
 #: than its other view (and beyond Max Allowed 2D Projection Error) is another blob (`_far_pair_view`).
 FAR_PAIR_RATIO = CONFIDENT_RATIO
@@ -918,8 +918,8 @@ class FrameTracker(NewPoints):
             # Unweighted: a patch's word on which view is wrong counts as a blob's (a weak patch beside a
             # close pair would leave the pair to judge a good third blob by its poor depth).
             held, Xs = held_out_errors(rig, uv_c[rows], valid[rows], X[rows])
-            worst = np.argmax(held, axis=1)
-            e = held[np.arange(len(rows)), worst]
+            worst = most = np.argmax(held, axis=1)
+            e = held[np.arange(len(rows)), most]
             if limit is None:
                 limit = held_out_limit(e, self.p.max_allowed_2d_projection_error)
             # Two close cameras left alone fix the depth badly (mm per pixel of a biased detection), so
@@ -962,7 +962,7 @@ class FrameTracker(NewPoints):
                 # point went 4.6 mm off).
                 nearer = near[np.arange(len(rows)), worst] < np.linalg.norm(X[rows] - pred[rows], axis=1)
                 far = e > FAR_HELD_OUT * self.p.max_allowed_2d_projection_error
-                worst = np.where(far, np.argmax(held, axis=1), worst)
+                worst = np.where(far, most, worst)
                 bad &= (judged & nearer) | far
             if not np.any(bad):
                 break
