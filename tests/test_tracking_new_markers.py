@@ -219,3 +219,30 @@ def test_with_images_a_match_as_faint_as_a_freckle_makes_no_point(quiet, level, 
 
     cmd, new, _ = run(sc, end_frame=12, images=images)
     assert len(new) == int(made)
+
+
+def test_a_new_point_is_tracked_back_while_another_point_is_lost_on_the_frame_it_was_made(quiet):
+    # The tracking back starts from the frame the new point was made on (11); a point lost there (its marker
+    # hidden in every camera on frames 8-14) has no position to take its neighbours from.  Measured: the run
+    # stopped with "data must be finite" (scipy's tree of the points' positions) before elastic.neighbours
+    # left such points out.
+    sc = without_point(quiet, sure_from=10)
+    pid, other = next((p, m) for p, m in identify(sc, 0).items() if m != M)
+    hide(sc, other, range(8, 15), keep={})
+    cmd, new, _ = run(sc)
+    assert len(new) == 1
+    q = new[0]
+    assert np.array_equal(np.flatnonzero(q.status == ST_RECONSTRUCTED), np.arange(1, sc.project.frame_count))
+    assert np.max(np.linalg.norm(q.pos[1:] - sc.face[1:, M], axis=1)) < 0.2
+    assert sc.project.points[pid].status[11] == ST_NONE
+
+
+def test_points_without_a_position_have_no_neighbours_and_are_no_ones():
+    X = np.random.default_rng(0).normal(0.0, 10.0, (12, 3))
+    X[[3, 7]] = np.nan
+    nb = elastic.neighbours(X, k=4, mutual=2)
+    assert np.all(nb[[3, 7]] == -1)
+    assert not np.isin(nb, [3, 7]).any()
+    keep = np.array([i for i in range(12) if i not in (3, 7)])
+    sub = elastic.neighbours(X[keep], k=4, mutual=2)
+    np.testing.assert_array_equal(nb[keep], np.where(sub >= 0, keep[np.maximum(sub, 0)], -1))

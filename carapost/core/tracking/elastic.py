@@ -46,9 +46,18 @@ def neighbours(X: np.ndarray, k: int = K_NEIGHBOURS, mutual: int = 0) -> np.ndar
     nearest six are lips, mouth corners and nasolabials while the chin counts
     the lower lip among its own; with the link both ways the lower lip hears the
     chin too, and a jaw marker the cheek beside it.
+
+    A point without a position (a row with NaN) has no neighbours and is no one's.
     """
     n = len(X)
     out = np.full((n, k + mutual), -1)
+    have = np.all(np.isfinite(X), axis=1)
+    if not have.all():
+        # The tracking of new points back from the frame they were made on starts where other points may be lost.
+        rows = np.flatnonzero(have)
+        sub = neighbours(X[rows], k, mutual)
+        out[rows] = np.where(sub >= 0, rows[np.maximum(sub, 0)], -1)
+        return out
     if n < 2:
         return out
     kk = min(k, n - 1)
