@@ -52,7 +52,32 @@ def test_the_inputs_are_the_grid_in_the_dots_frame_over_its_contrast():
 def test_the_shipped_models_have_a_centre_stage():
     for white in (False, True):
         net = default_model(white).centre
-        assert net is not None and net.w1.shape == (cn.N_INPUTS, len(net.b1)) and net.w2.shape == (len(net.b1), 2)
+        assert net is not None and net.w1.shape == (cn.N_INPUTS, len(net.b1))
+    # White's has two layers (session 40); black's one (two were no better on black dots).
+    white, black = default_model(True).centre, default_model(False).centre
+    assert white.wh.shape == (len(white.b1), len(white.bh)) and white.w2.shape == (len(white.bh), 2)
+    assert black.wh is None and black.w2.shape == (len(black.b1), 2)
+
+
+def _one_layer(net: cn.CentreNet) -> cn.CentreNet:
+    """A one-layer network as session 39's files held (its first layer and an output of its own)."""
+    w2 = np.random.default_rng(2).normal(0.0, 0.05, (len(net.b1), 2)).astype(np.float32)
+    return cn.CentreNet(net.mean, net.std, net.w1, net.b1, w2, np.array([0.01, -0.02], np.float32))
+
+
+def test_a_model_file_with_a_one_layer_centre_stage_still_loads_and_corrects(tmp_path):
+    shipped = default_model(True)
+    model = BlobModel(shipped.stage1, shipped.stage2, shipped.edge, _one_layer(shipped.centre))
+    path = tmp_path / "m.npz"
+    model.save(path)
+    assert "sc_wh" not in np.load(path)
+    back = BlobModel.load(path).centre
+    assert back.wh is None and back.bh is None
+    np.testing.assert_array_equal(back.w2, model.centre.w2)
+    frames = sample_frames(True, seed=7, frames=1, cameras=(2,))
+    on = detector.detect(frames[0].image, white=True, model=BlobModel.load(path))
+    off = detector.detect(frames[0].image, white=True, learned_centres=False)
+    assert len(on) == len(off) and np.any(on["x"] != off["x"])
 
 
 def test_a_model_file_with_another_grid_is_refused(tmp_path):
@@ -117,11 +142,12 @@ def test_a_model_without_a_centre_stage_leaves_the_centres(monkeypatch):
                                   detector.detect(frames[0].image, learned_centres=False))
 
 
-def test_the_compiled_network_is_the_numpy_one():
+@pytest.mark.parametrize("layers", [2, 1])
+def test_the_compiled_network_is_the_numpy_one(layers):
     frames = sample_frames(True, seed=7, frames=1, cameras=(2,))
     rec = detect(frames[0].image, white=True, learned_centres=False)
     img = detector.as_grey_u8(frames[0].image)
-    net = default_model(True).centre
+    net = default_model(True).centre if layers == 2 else _one_layer(default_model(True).centre)
     inputs, texture = cn.centre_inputs(img, rec["x"], rec["y"], rec["major"], rec["minor"], rec["angle"], 2.0)
     geo = cn._geometry(rec["x"], rec["y"], rec["major"], rec["minor"], rec["angle"])
     err, tex = np.empty((len(rec), 2)), np.empty(len(rec))

@@ -23,8 +23,8 @@ With ``--centre-scenes N`` the **centre stage** (step 9, ``carapost.core.blobs.c
 too: every detection (steps 1-8, the classifier just trained or, with ``--centre-only``, the one in
 ``--out``) within 1.5 px of a marker of the generated images, of N sample-take scenes more (seeds 3000
 and up; a tenth as many jaw-open ones) and of N generated images of large dots is an example; its inputs are the grey levels on the grid about
-it and its target is how far its centre is off, along and across its ellipse.  The network (64 tanh
-units, linear output) is fitted with minibatch Adam on the squared error, each example seen in its four
+it and its target is how far its centre is off, along and across its ellipse.  The network (two tanh
+layers of 96 and 48 units, linear output; session 40, one layer of 64 before) is fitted with minibatch Adam on the squared error, each example seen in its four
 mirror images (the grid flipped along either axis, the target's sign with it).
 
 Usage::
@@ -36,7 +36,8 @@ The shipped edge stages (session 28) were made, over the shipped stages 1 and 2,
 
     python tools/train_blob_model.py --images 200 --edge-scenes 30 --edge-fpr 0.5 --edge-only --seed 5
 
-and the shipped centre stages (session 39), over the shipped stages 1, 2 and edge, with::
+and the shipped centre stages (session 40; session 39's had one layer of 64 units), over the shipped stages 1, 2
+and edge, with::
 
     python tools/train_blob_model.py --images 200 --centre-scenes 200 --centre-only --seed 5
 """
@@ -277,18 +278,23 @@ def _mirrored(X: np.ndarray, Y: np.ndarray):
     return np.concatenate(xs), np.concatenate(ys)
 
 
-def train_centre(X: np.ndarray, Y: np.ndarray, seed: int, hidden: int = 64, epochs: int = 40,
+def train_centre(X: np.ndarray, Y: np.ndarray, seed: int, hidden: tuple = (96, 48), epochs: int = 40,
                  batch: int = 512, lr: float = 2e-3, decay: float = 1e-4) -> CentreNet:
-    """The centre stage: minibatch Adam on the squared error of a one-hidden-layer tanh network (learning
-    rate on a cosine from ``lr`` to 0 over ``epochs``), on the examples and their mirror images."""
+    """The centre stage: minibatch Adam on the squared error of a network of one or two tanh layers (``hidden``
+    units each; learning rate on a cosine from ``lr`` to 0 over ``epochs``, weight decay on the hidden layers), on
+    the examples and their mirror images."""
     X, Y = _mirrored(X, Y)
     rng = np.random.default_rng(seed)
     mean = X.mean(0)
     std = X.std(0) + 1e-6
     Z = ((X - mean) / std).astype(np.float32)
     n, d = Z.shape
-    params = [(rng.standard_normal((d, hidden)) / np.sqrt(d)).astype(np.float32), np.zeros(hidden, np.float32),
-              (rng.standard_normal((hidden, 2)) * 0.01).astype(np.float32), np.zeros(2, np.float32)]
+    sizes = (d, *hidden)
+    params = []
+    for fan_in, fan_out in zip(sizes[:-1], sizes[1:]):
+        params += [(rng.standard_normal((fan_in, fan_out)) / np.sqrt(fan_in)).astype(np.float32),
+                   np.zeros(fan_out, np.float32)]
+    params += [(rng.standard_normal((sizes[-1], 2)) * 0.01).astype(np.float32), np.zeros(2, np.float32)]
     m = [np.zeros_like(p) for p in params]
     v = [np.zeros_like(p) for p in params]
     t = 0
@@ -297,20 +303,25 @@ def train_centre(X: np.ndarray, Y: np.ndarray, seed: int, hidden: int = 64, epoc
         step = lr * 0.5 * (1.0 + np.cos(np.pi * ep / epochs))
         for s in range(0, n, batch):
             idx = order[s:s + batch]
-            z, y = Z[idx], Y[idx]
-            W1, c1, W2, c2 = params
-            H = np.tanh(z @ W1 + c1)
-            err = H @ W2 + c2 - y
-            gW2 = H.T @ err / len(idx)
-            gH = (err @ W2.T) * (1.0 - H * H)
-            grads = (z.T @ gH / len(idx) + decay * W1, gH.mean(0), gW2, err.mean(0))
+            acts = [Z[idx]]
+            for k in range(0, len(params) - 2, 2):
+                acts.append(np.tanh(acts[-1] @ params[k] + params[k + 1]))
+            err = acts[-1] @ params[-2] + params[-1] - Y[idx]
+            grads = [acts[-1].T @ err / len(idx), err.mean(0)]
+            g = err @ params[-2].T
+            for k in range(len(params) - 4, -1, -2):
+                g = g * (1.0 - acts[k // 2 + 1] ** 2)
+                grads = [acts[k // 2].T @ g / len(idx) + decay * params[k], g.mean(0)] + grads
+                g = g @ params[k].T
             t += 1
             for k, g in enumerate(grads):
                 m[k] = 0.9 * m[k] + 0.1 * g
                 v[k] = 0.999 * v[k] + 0.001 * g * g
                 params[k] = (params[k] - step * (m[k] / (1 - 0.9 ** t)) / (np.sqrt(v[k] / (1 - 0.999 ** t)) + 1e-8)
                              ).astype(np.float32)
-    return CentreNet(mean.astype(np.float32), std.astype(np.float32), *params)
+    hidden_pair = params[2:4] if len(hidden) == 2 else [None, None]
+    return CentreNet(mean.astype(np.float32), std.astype(np.float32), params[0], params[1], params[-2], params[-1],
+                     *hidden_pair)
 
 
 def _centre_stage(model: BlobModel, white: bool, a) -> CentreNet:
@@ -318,7 +329,7 @@ def _centre_stage(model: BlobModel, white: bool, a) -> CentreNet:
     data = images(white, a.images, a.seed) + centre_takes(white, a.centre_scenes, a.seed)
     data += large_images(white, a.centre_scenes, a.seed)
     X, Y = centre_examples(data, white, model)
-    net = train_centre(X, Y, a.seed + 3)
+    net = train_centre(X, Y, a.seed + 3, hidden=a.centre_hidden)
     after = Y - net.error(X)
     print(f"centre stage: {len(Y)} detections, centre RMS on them {np.sqrt((Y ** 2).sum(1).mean()):.4f} -> "
           f"{np.sqrt((after ** 2).sum(1).mean()):.4f} px (before the texture gate)")
@@ -433,6 +444,8 @@ def main(argv=None) -> int:
     ap.add_argument("--centre-scenes", type=int, default=0,
                     help="train the centre stage too, on the detections of the generated images and of this many "
                          "sample-take scenes more per colour (0: no centre stage)")
+    ap.add_argument("--centre-hidden", type=lambda v: tuple(int(n) for n in v.split(",")), default=(96, 48),
+                    help="the centre stage's hidden layers, units each, comma-separated (one or two layers)")
     ap.add_argument("--centre-only", action="store_true",
                     help="keep the other stages in --out and (re)train only the centre stage")
     ap.add_argument("--colour", choices=("both", "black", "white"), default="both",

@@ -5,7 +5,7 @@ moments, the painted edge, the profile along an oblique dot, the light's slope).
 What is left of their error is mostly the skin around the dot: its texture,
 shading and sheen move the edge and the moments alike, by an amount the image
 shows but no fixed rule reads (docs/blobs.md, "White centre RMS").  This step
-reads it: a small network looks at the grey levels about the detection, sampled
+reads it: a small network (one or two tanh layers) looks at the grey levels about the detection, sampled
 on a grid in the detection's own frame (``GRID`` x ``GRID`` points spanning its
 semi-axes plus ``MARGIN`` px either way; the levels as a share of the dot's
 contrast over its surround), with the ellipse's semi-axes, their ratio and the
@@ -110,35 +110,46 @@ def _all_inputs(img, x, y, a, b, co, si, noise, out, texture):
         texture[k] = _inputs_one(img, x[k], y[k], a[k], b[k], co[k], si[k], noise, grid, border, tmp, out[k])
 
 
+@njit(inline="always", **JIT)
+def _tanh_layer(x, n, wt, b, out):
+    """``out = tanh(x[:n] @ wt.T + b)`` (``wt`` the layer's weights transposed: its rows are contiguous, and each
+    unit's sum vectorises)."""
+    for j in range(len(b)):
+        wj = wt[j]
+        acc = 0.0
+        for i in range(n):
+            acc += x[i] * wj[i]
+        # tanh from one exponential (libm's tanh cost twice as much here; the same to ~1e-16).
+        q = acc + b[j]
+        d = math.exp(-2.0 * abs(q))
+        out[j] = math.copysign((1.0 - d) / (1.0 + d), q)
+
+
 @njit(**JIT)
-def _errors(img, x, y, a, b, co, si, noise, mean, std, w1t, b1, w2, b2, err, texture):
+def _errors(img, x, y, a, b, co, si, noise, mean, std, w1t, b1, wht, bh, w2, b2, err, texture):
     """Step 9's network on every detection: its error along and across (``err``, ``(n, 2)``) and its texture.
 
-    The inputs of :func:`_inputs_one`, standardised, through one tanh layer and a linear output, one
-    detection at a time (compiled and without the interpreter's lock: the range operation's threads detect
-    in parallel, and numpy's matrix products here queued them on each other).
+    The inputs of :func:`_inputs_one`, standardised, through one or two tanh layers (``bh`` empty: one) and a
+    linear output, one detection at a time (compiled and without the interpreter's lock: the range operation's
+    threads detect in parallel, and numpy's matrix products here queued them on each other).
     """
     grid = np.empty(GRID * GRID)
     border, tmp = np.empty(len(_BORDER)), np.empty(len(_BORDER))
     row = np.empty(N_INPUTS)
+    h1, h2 = np.empty(len(b1)), np.empty(len(bh))
     for k in range(len(x)):
         texture[k] = _inputs_one(img, x[k], y[k], a[k], b[k], co[k], si[k], noise, grid, border, tmp, row)
         for i in range(N_INPUTS):
             row[i] = (row[i] - mean[i]) / std[i]
+        _tanh_layer(row, N_INPUTS, w1t, b1, h1)
+        last = h1
+        if len(bh):
+            _tanh_layer(h1, len(b1), wht, bh, h2)
+            last = h2
         e0, e1 = b2[0], b2[1]
-        # One hidden unit at a time, a dot product over the inputs (``w1t`` is the first layer transposed: its
-        # rows are contiguous, and the sum vectorises).
-        for j in range(len(b1)):
-            wj = w1t[j]
-            acc = 0.0
-            for i in range(N_INPUTS):
-                acc += row[i] * wj[i]
-            # tanh from one exponential (libm's tanh cost twice as much here; the same to ~1e-16).
-            q = acc + b1[j]
-            d = math.exp(-2.0 * abs(q))
-            t = math.copysign((1.0 - d) / (1.0 + d), q)
-            e0 += t * w2[j, 0]
-            e1 += t * w2[j, 1]
+        for j in range(len(last)):
+            e0 += last[j] * w2[j, 0]
+            e1 += last[j] * w2[j, 1]
         err[k, 0], err[k, 1] = e0, e1
 
 
@@ -177,7 +188,8 @@ def centre_inputs(img: np.ndarray, x, y, major, minor, angle, noise: float):
 
 @dataclass
 class CentreNet:
-    """Standardisation, one tanh hidden layer and a linear output: the centre's error (px) along and across."""
+    """Standardisation, one or two tanh hidden layers and a linear output: the centre's error (px) along and
+    across.  ``w1``, ``b1``: the first layer; ``wh``, ``bh``: the second (None: none); ``w2``, ``b2``: the output."""
 
     mean: np.ndarray
     std: np.ndarray
@@ -185,27 +197,36 @@ class CentreNet:
     b1: np.ndarray
     w2: np.ndarray
     b2: np.ndarray
+    wh: np.ndarray | None = None
+    bh: np.ndarray | None = None
 
     def error(self, inputs: np.ndarray) -> np.ndarray:
         """``(n, 2)`` estimated error of each centre along and across its ellipse's major axis, px."""
         if len(inputs) == 0:
             return np.zeros((0, 2), np.float32)
         h = np.tanh(((inputs - self.mean) / self.std) @ self.w1 + self.b1)
+        if self.wh is not None:
+            h = np.tanh(h @ self.wh + self.bh)
         return h @ self.w2 + self.b2
 
     @cached_property
     def kernel_arrays(self) -> tuple:
-        """The weights as :func:`_errors` takes them (float64, contiguous)."""
-        return tuple(np.ascontiguousarray(v, np.float64) for v in (self.mean, self.std, self.w1.T, self.b1, self.w2,
-                                                                     self.b2))
+        """The weights as :func:`_errors` takes them (float64, contiguous; layers transposed)."""
+        wh = np.zeros((0, 0)) if self.wh is None else self.wh.T
+        bh = np.zeros(0) if self.bh is None else self.bh
+        return tuple(np.ascontiguousarray(v, np.float64) for v in (self.mean, self.std, self.w1.T, self.b1, wh, bh,
+                                                                     self.w2, self.b2))
 
     def arrays(self, prefix: str) -> dict:
-        return {prefix + k: np.asarray(v, np.float32) for k, v in
-                dict(mean=self.mean, std=self.std, w1=self.w1, b1=self.b1, w2=self.w2, b2=self.b2).items()}
+        named = dict(mean=self.mean, std=self.std, w1=self.w1, b1=self.b1, w2=self.w2, b2=self.b2)
+        if self.wh is not None:
+            named.update(wh=self.wh, bh=self.bh)
+        return {prefix + k: np.asarray(v, np.float32) for k, v in named.items()}
 
     @classmethod
     def from_arrays(cls, z, prefix: str) -> "CentreNet":
-        return cls(*(np.asarray(z[prefix + k], np.float32) for k in ("mean", "std", "w1", "b1", "w2", "b2")))
+        names = ("mean", "std", "w1", "b1", "w2", "b2") + (("wh", "bh") if prefix + "wh" in z else ())
+        return cls(*(np.asarray(z[prefix + k], np.float32) for k in names))
 
 
 def corrected_centres(img: np.ndarray, rec: np.ndarray, noise: float, net: CentreNet):
