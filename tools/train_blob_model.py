@@ -23,9 +23,10 @@ With ``--centre-scenes N`` the **centre stage** (step 9, ``carapost.core.blobs.c
 too: every detection (steps 1-8, the classifier just trained or, with ``--centre-only``, the one in
 ``--out``) within 1.5 px of a marker of the generated images, of N sample-take scenes more (seeds 3000
 and up; a tenth as many jaw-open ones) and of N generated images of large dots is an example; its inputs are the grey levels on the grid about
-it and its target is how far its centre is off, along and across its ellipse.  The network (two tanh
-layers of 96 and 48 units, linear output; session 40, one layer of 64 before) is fitted with minibatch Adam on the squared error, each example seen in its four
-mirror images (the grid flipped along either axis, the target's sign with it).
+it and its target is how far its centre is off, along and across its ellipse.  The network (tanh layers,
+``--centre-hidden``: two of 96 and 48 units by default, or one; a linear output) is fitted with minibatch
+Adam on the squared error, each example seen in its four mirror images (the grid flipped along either axis,
+the target's sign with it).
 
 Usage::
 
@@ -36,10 +37,12 @@ The shipped edge stages (session 28) were made, over the shipped stages 1 and 2,
 
     python tools/train_blob_model.py --images 200 --edge-scenes 30 --edge-fpr 0.5 --edge-only --seed 5
 
-and the shipped centre stages (session 40; session 39's had one layer of 64 units), over the shipped stages 1, 2
-and edge, with::
+and the shipped centre stages, over the shipped stages 1, 2 and edge, white's (two layers, session 40) and
+black's (one layer of 64 units, session 39), with::
 
-    python tools/train_blob_model.py --images 200 --centre-scenes 200 --centre-only --seed 5
+    python tools/train_blob_model.py --images 200 --centre-scenes 200 --centre-only --seed 5 --colour white
+    python tools/train_blob_model.py --images 200 --centre-scenes 200 --centre-only --seed 5 --colour black \
+        --centre-hidden 64
 """
 from __future__ import annotations
 
@@ -425,6 +428,17 @@ def _edge_stage(model: BlobModel, white: bool, a) -> MLP:
     return edge
 
 
+def _layers(text: str) -> tuple:
+    """``--centre-hidden``: one or two positive unit counts, comma-separated (step 9 runs one or two layers)."""
+    try:
+        units = tuple(int(n) for n in text.split(","))
+    except ValueError:
+        units = ()
+    if len(units) not in (1, 2) or min(units) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: one or two positive unit counts, e.g. 96,48 or 64")
+    return units
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--images", type=int, default=160, help="generated training images per colour")
@@ -444,7 +458,7 @@ def main(argv=None) -> int:
     ap.add_argument("--centre-scenes", type=int, default=0,
                     help="train the centre stage too, on the detections of the generated images and of this many "
                          "sample-take scenes more per colour (0: no centre stage)")
-    ap.add_argument("--centre-hidden", type=lambda v: tuple(int(n) for n in v.split(",")), default=(96, 48),
+    ap.add_argument("--centre-hidden", type=_layers, default=(96, 48),
                     help="the centre stage's hidden layers, units each, comma-separated (one or two layers)")
     ap.add_argument("--centre-only", action="store_true",
                     help="keep the other stages in --out and (re)train only the centre stage")

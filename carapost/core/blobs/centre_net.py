@@ -5,12 +5,12 @@ moments, the painted edge, the profile along an oblique dot, the light's slope).
 What is left of their error is mostly the skin around the dot: its texture,
 shading and sheen move the edge and the moments alike, by an amount the image
 shows but no fixed rule reads (docs/blobs.md, "White centre RMS").  This step
-reads it: a small network (one or two tanh layers) looks at the grey levels about the detection, sampled
-on a grid in the detection's own frame (``GRID`` x ``GRID`` points spanning its
-semi-axes plus ``MARGIN`` px either way; the levels as a share of the dot's
-contrast over its surround), with the ellipse's semi-axes, their ratio and the
-contrast over the image's noise, and answers how far the centre is off along
-and across the ellipse.  It was trained (``tools/train_blob_model.py
+reads it: a small network (one or two tanh layers) looks at the grey levels
+about the detection, sampled on a grid in the detection's own frame (``GRID`` x
+``GRID`` points spanning its semi-axes plus ``MARGIN`` px either way; the levels
+as a share of the dot's contrast over its surround), with the ellipse's
+semi-axes, their ratio and the contrast over the image's noise, and answers how
+far the centre is off along and across the ellipse.  It was trained (``tools/train_blob_model.py
 --centre-only``) on detections of generated sample takes and images whose true
 centres are known, never on the benchmark's takes.
 
