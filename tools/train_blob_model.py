@@ -22,8 +22,9 @@ the same weights.
 With ``--centre-scenes N`` the **centre stage** (step 9, ``carapost.core.blobs.centre_net``) is trained
 too: every detection (steps 1-8, the classifier just trained or, with ``--centre-only``, the one in
 ``--out``) within 1.5 px of a marker of the generated images, of N sample-take scenes more (seeds 3000
-and up; a tenth as many jaw-open ones) and of N generated images of large dots is an example; its inputs are the grey levels on the grid about
-it and its target is how far its centre is off, along and across its ellipse.  The network (tanh layers,
+and up; a tenth as many jaw-open ones) and of N generated images of large dots is an example; its inputs
+are the grey levels on the grid about it and its target is how far its centre is off, along and across
+its ellipse.  The network (tanh layers,
 ``--centre-hidden``: two of 96 and 48 units by default, or one; a linear output) is fitted with minibatch
 Adam on the squared error, each example seen in its four mirror images (the grid flipped along either axis,
 the target's sign with it).
@@ -281,7 +282,11 @@ def _mirrored(X: np.ndarray, Y: np.ndarray):
     return np.concatenate(xs), np.concatenate(ys)
 
 
-def train_centre(X: np.ndarray, Y: np.ndarray, seed: int, hidden: tuple = (96, 48), epochs: int = 40,
+#: The centre stage's hidden layers (units each) unless ``--centre-hidden`` says otherwise: white's since session 40.
+CENTRE_HIDDEN = (96, 48)
+
+
+def train_centre(X: np.ndarray, Y: np.ndarray, seed: int, hidden: tuple = CENTRE_HIDDEN, epochs: int = 40,
                  batch: int = 512, lr: float = 2e-3, decay: float = 1e-4) -> CentreNet:
     """The centre stage: minibatch Adam on the squared error of a network of one or two tanh layers (``hidden``
     units each; learning rate on a cosine from ``lr`` to 0 over ``epochs``, weight decay on the hidden layers), on
@@ -458,7 +463,7 @@ def main(argv=None) -> int:
     ap.add_argument("--centre-scenes", type=int, default=0,
                     help="train the centre stage too, on the detections of the generated images and of this many "
                          "sample-take scenes more per colour (0: no centre stage)")
-    ap.add_argument("--centre-hidden", type=_layers, default=(96, 48),
+    ap.add_argument("--centre-hidden", type=_layers, default=CENTRE_HIDDEN,
                     help="the centre stage's hidden layers, units each, comma-separated (one or two layers)")
     ap.add_argument("--centre-only", action="store_true",
                     help="keep the other stages in --out and (re)train only the centre stage")
@@ -479,7 +484,6 @@ def main(argv=None) -> int:
             continue
         if a.centre_only:
             model = BlobModel.load(path)
-            model.centre = None
             model.centre = _centre_stage(model, white, a)
             model.save(path)
             print(f"{name}: centre stage only; {time.time() - t:.0f} s -> {path}")
