@@ -307,6 +307,8 @@ def test_patch_tracking_alone_stops_after_a_few_frames(quiet):
         for s in range(4):
             if sc.face_det[f, s, m] >= 0:
                 remove_marker_detection(sc, f, s, m)
+    # The images show the dot that the detections lack: Search Missing Views, on by default, would find it.
+    sc.project.properties.set("tracking.search_missing_views", False)
     images = rendered(sc, lambda s, f: (m,) if 3 <= f < 15 else ())
     track(sc.project, 0, 1, end_frame=20, images=images).do(sc.project)
     p = marker_point(sc, m)

@@ -88,6 +88,8 @@ def test_patches_that_follow_a_return_do_not_confirm_it(quiet):
     sc = copy.deepcopy(quiet)
     m = 5
     hide(sc, m, range(4, 13), {8: (1, 3)})
+    # The images show the dot that the detections lack: Search Missing Views, on by default, would find it.
+    sc.project.properties.set("tracking.search_missing_views", False)
     # The dot is drawn on frame 9 though no detection is left there: patches find it.
     images = test_tracking.rendered(sc, lambda s, f: (m,) if f == 9 else ())
     p = tracked_point(sc, m, images)
@@ -115,6 +117,8 @@ def test_a_lost_point_does_not_come_back_on_one_blob_and_patches(quiet, monkeypa
     sc = copy.deepcopy(quiet)
     m = 5
     hide(sc, m, range(5, 13), {8: (1,)})
+    # The images show the dot that the detections lack: Search Missing Views, on by default, would find it.
+    sc.project.properties.set("tracking.search_missing_views", False)
     p = tracked_point(sc, m, test_tracking.rendered(sc, lambda s, f: (m,) if f == 8 else ()))
     assert p.status[4] != ST_NONE and p.status[6] == ST_NONE         # seen, then lost
     assert np.count_nonzero(p.src[8] == SRC_PATCH) == (0 if on_blobs else 3)

@@ -197,6 +197,11 @@ PROPERTY_TABLE: tuple[PropertyDef, ...] = (
        help="Give a marker that no point follows (hidden when Initialize 3D ran) a new, unlabelled point once "
             "two frames in a row match it in two or more cameras, on the face and clear of every point. "
             "Not in CaraPost's guide."),
+    _P("tracking", "search_missing_views", "Search Missing Views", bool, True,
+       help="Where fewer than two cameras detect a point near its prediction, look for its dot again in the other "
+            "cameras at full resolution, at any score; keep what makes the point whole (two or more cameras' "
+            "dots meeting near the prediction). The dots kept are added to the frame's detections. "
+            "Not in CaraPost's guide."),
     # Gap-Filling Parameters
     _P("gap_filling", "overwrite_existing_filled_gaps", "Overwrite Existing Filled Gaps", bool, False,
        help="Recompute gaps already filled (points with zero or one detection)."),

@@ -270,8 +270,9 @@ def _params(project: Project, rom_p: dict):
         "face_point_tracking_distance": rom_p["rom_face_point_tracking_distance"],
         "brim_point_tracking_distance": rom_p["rom_brim_point_tracking_distance"],
         "max_allowed_3d_point_error": rom_p["rom_max_allowed_3d_point_error"],
-        # One frame is tracked from the ROM: its points are the ROM's, none are made.
-        "add_points_for_new_markers": False})
+        # One frame is tracked from the ROM: its points are the ROM's, none are made; and the frame's
+        # detections are its own (the results' samples index them, and no dot found by the search is kept).
+        "add_points_for_new_markers": False, "search_missing_views": False})
 
 
 def initialize_from_rom(project: Project, frame: int, brim_only: bool = False, images=None,

@@ -15,12 +15,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ..commands import Command, CompoundCommand
-from ..edits import AddPoints, SetCameraPoses, SetPointData
+from ..edits import AddPoints, SetCameraPoses, SetFrameDetections, SetPointData
 from ..errors import CaraError
 from ..points import BRIM, FACE, SRC_DETECTION, SRC_NONE, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
 from ..progress import Cancelled, Progress, frame_payload
 from .engine import FrameTracker
 from .geometry import RigState
+from .missing_views import appended
 from .params import TrackingParams
 from .patch import PatchPool
 
@@ -208,7 +209,7 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
         cancelled = True
     finally:
         pool.close()
-    cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd, fill)
+    cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd, fill, recs_of)
     cmd.cancelled = cancelled
     if unmade:
         cmd.summary += (f"; no points made for new markers: {left_out} face point(s) not tracked (not selected, "
@@ -238,13 +239,15 @@ def _back_fill(project, results, start, direction, recs_of, params, source, pool
     S = project.sensor_count
     rig = RigState(project.rig.cameras_at(start))
     rig.R, rig.C = r0.R.copy(), r0.C.copy()
-    recs0 = recs_of(r0.frame)
+    recs0 = appended(recs_of(r0.frame), r0.found)
     size0 = np.full(r0.uv.shape, np.nan)
     for s in range(S):
         use = (r0.src[:, s] == SRC_DETECTION) & (r0.det[:, s] >= 0)
         size0[use, s, 0] = recs0[s]["major"][r0.det[use, s]]
         size0[use, s, 1] = recs0[s]["minor"][r0.det[use, s]]
-    tracker = FrameTracker(rig, r0.X, r0.uv, size0, brim, replace(params, add_points_for_new_markers=False),
+    # Without Search Missing Views: its dots would be a second set of records for frames the run already tracked.
+    tracker = FrameTracker(rig, r0.X, r0.uv, size0, brim,
+                           replace(params, add_points_for_new_markers=False, search_missing_views=False),
                            images=source, pool=pool, start_frame=r0.frame,
                            brim_radius=project.brim.radius if len(brim) else None)
     new_rows = np.arange(n_face, len(r0.status))
@@ -306,11 +309,16 @@ def _publish(progress: Progress, r, face_ids: np.ndarray, brim_ids: np.ndarray, 
         cameras=(r.R, r.C)))
 
 
-def _command(project, name, face, brim_pts, brim, results, detect_cmd, fill=None) -> Command:
+def _command(project, name, face, brim_pts, brim, results, detect_cmd, fill=None, recs_of=None) -> Command:
     S = project.sensor_count
     cmds: list[Command] = []
     if detect_cmd is not None:
         cmds.append(detect_cmd)
+    # The dots Search Missing Views found, after each frame's own records (the samples' ``det`` count them so).
+    found = {(s, r.frame): rec for r in results if r.found is not None
+             for s, rec in enumerate(appended(recs_of(r.frame), r.found)) if len(r.found[s])}
+    if found:
+        cmds.append(SetFrameDetections(found, name="Search Missing Views"))
     n = len(results)
     per_frame = []
     if n:

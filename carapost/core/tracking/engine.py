@@ -14,7 +14,7 @@ import numpy as np
 
 from ..disc_image import disc_image_offsets
 from ..points import SRC_DETECTION, SRC_NONE, SRC_PATCH, ST_NONE, ST_RECONSTRUCTED, ST_SINGLE
-from . import elastic, patch, reacquire, vote
+from . import elastic, missing_views, patch, reacquire, vote
 from .new_points import NewPoints
 from .nearest import SortedSweep
 from .assign import candidates, mutual_best, size_changed
@@ -221,6 +221,9 @@ class FrameResult:
     retract: np.ndarray | None = None
     #: Rows at the end that are new points (markers no point followed), made on this frame.
     new: int = 0
+    #: Per sensor, the dots Search Missing Views found and appended to the frame's detections (``det`` counts
+    #: them after the frame's own records), or None.
+    found: list | None = None
 
     def take_back(self, rows: np.ndarray) -> None:
         """Clear the face samples of ``rows`` (N,) bool on this frame (a return that was not confirmed)."""
@@ -411,6 +414,7 @@ class FrameTracker(NewPoints):
         blob0 = finite_rows(self.size) & finite_rows(self.uv_prev)
         self.blob_frame = np.where(blob0 & (start_frame is not None), -1 if start_frame is None else start_frame, -1)
         self.blob_uv = np.where(blob0[..., None], self.uv_prev, np.nan)
+        self.seen = blob0.copy()                         # views that had a blob on some frame (Search Missing Views)
         self._img_cache: OrderedDict = OrderedDict()
         # Matches for markers no point follows found on the last frame (:meth:`_add_new_markers`).
         self._pending = None
@@ -585,6 +589,20 @@ class FrameTracker(NewPoints):
         taken[fd.attached(det)[2]] = True
         # 4. Pass 2: elastic prediction from the anchors (``el``), within the Max Elastic Prediction Distance.
         X2 = np.where(anchor[:, None], Xa, np.where(np.isfinite(el), el, Xp))
+        # 4a. Search Missing Views: points that fewer than two cameras detect near this prediction, looked for
+        # again in the images (:mod:`.missing_views`).  After the anchors, not before: at a jaw's jerk their
+        # elastic prediction is where the dots are, a point's own motion is not.
+        extra = None
+        if p.search_missing_views and self.images is not None:
+            extra = missing_views.look_again(rig, lambda s: self._image(s, frame), X2, recs, fd.xy, self.seen)
+            if extra is not None:
+                # Appended after each sensor's own records: the brim's and the anchors' matches keep their indices.
+                recs = missing_views.appended(recs, extra)
+                fd = FrameData(self.rig, recs)
+                fd.free[fd.attached(bdet)[2]] = False
+                offsets = fd.offsets
+                taken = np.zeros(int(offsets[-1]), bool)
+                taken[fd.attached(det)[2]] = True
         use_el = anchor | finite_rows(el)
         r2 = np.where(use_el, float(p.face_point_max_elastic_prediction_distance),
                       float(p.face_point_tracking_distance))
@@ -748,6 +766,7 @@ class FrameTracker(NewPoints):
         blob = src == SRC_DETECTION
         self.blob_frame[blob] = frame
         self.blob_uv[blob] = uv_raw[blob]
+        self.seen |= blob
         r, s, g = fd.attached(det, blob)
         self.size[r, s] = fd.size_all[g]
         self.rig = rig
@@ -759,7 +778,7 @@ class FrameTracker(NewPoints):
         bscore[r, s] = 1.0
         berr = reprojection(rig, self.brim, buv_c, bdet >= 0)
         res = FrameResult(frame, rig.R.copy(), rig.C.copy(), X, status, residual, src, det, uv_raw, score,
-                          bdet, buv_raw, bscore, berr, retract if np.any(retract) else None)
+                          bdet, buv_raw, bscore, berr, retract if np.any(retract) else None, found=extra)
         # 10. Points for markers no point follows (rows added after the frame's own: they carry no state yet).
         if p.add_points_for_new_markers:
             known = np.where(have[:, None], X, np.where(finite_rows(Xp)[:, None], Xp, self.X_last))

@@ -101,6 +101,7 @@ class NewPoints:
         self._post_new = grow(self._post_new, np.full(n, np.inf))
         self.blob_frame = grow(self.blob_frame, np.where(valid, frame, -1))
         self.blob_uv = grow(self.blob_uv, uv_raw)
+        self.seen = grow(self.seen, valid)
         self.N = N + n
         res.X, res.status = X_all, grow(res.status, np.full(n, ST_RECONSTRUCTED, res.status.dtype))
         res.residual, res.src, res.det = grow(res.residual, residual), grow(res.src, src), grow(res.det, det)

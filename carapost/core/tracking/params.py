@@ -24,6 +24,7 @@ class TrackingParams:
     single_sensor_tracking_threshold: float = 0.5
     blob_size_difference_threshold: float = 0.75
     add_points_for_new_markers: bool = True
+    search_missing_views: bool = True
 
     @classmethod
     def from_project(cls, project, overrides: dict | None = None) -> "TrackingParams":

@@ -1,0 +1,144 @@
+"""Tracking Parameters > Search Missing Views: a point's dot looked for again where the detections lack it."""
+import copy
+
+import cv2
+import numpy as np
+import pytest
+
+from carapost.core.commands import UndoStack
+from carapost.core.points import SRC_DETECTION, ST_NONE
+from carapost.core.tracking import track
+from carapost.core.tracking.missing_views import MEET_MM, PAIR_MEET_MM, REACH_PX, find_in_crops
+from carapost.core.tracking.synthetic_take import initialise, make_take
+from support import remove_marker_detection
+from test_tracking import QUIET, marker_point, rendered
+
+M = 3
+
+
+@pytest.fixture(scope="module")
+def quiet():
+    """35 markers, 20 frames of slow head motion only, initialised on frame 0."""
+    sc = make_take(35, 20, seed=4, **QUIET)
+    initialise(sc, 0)
+    return sc
+
+
+def _undetected(quiet, frames=range(3, 15)):
+    """Marker M's detections removed in every camera on ``frames`` (its dot stays in the images)."""
+    sc = copy.deepcopy(quiet)
+    for f in frames:
+        for s in range(4):
+            if sc.face_det[f, s, M] >= 0:
+                remove_marker_detection(sc, f, s, M)
+    return sc
+
+
+def test_dots_are_found_in_crops_where_they_are():
+    """Discs at known sub-pixel centres are found within a tenth of a pixel, each for its own crop."""
+    rng = np.random.default_rng(3)
+    img = cv2.GaussianBlur(rng.uniform(130, 170, (240, 320)).astype(np.uint8), (0, 0), 2)
+    centres = np.array([[60.3, 50.7], [150.8, 120.2], [250.45, 190.6]])
+    for x, y in centres:
+        cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 16 * 3, 40, -1, cv2.LINE_AA, 4)
+    # Searched 2-3 px from each dot (the prediction is off), and once over bare skin.
+    asked = centres + np.array([[2.0, -1.0], [-1.5, 2.0], [0.5, 2.5]])
+    asked = np.vstack([asked, [[200.0, 60.0]]])
+    rec, which = find_in_crops(img, asked, white=False)
+    assert sorted(which.tolist()) == [0, 1, 2]
+    for k in range(3):
+        got = np.array([rec["x"][which == k][0], rec["y"][which == k][0]], float)
+        assert np.hypot(*(got - centres[k])) < 0.1, (k, got, centres[k])
+        assert 5.0 < float(rec["major"][which == k][0]) < 8.0       # the disc's diameter, 6 px, in image px
+    assert np.all(np.hypot(rec["x"] - asked[which, 0], rec["y"] - asked[which, 1]) <= REACH_PX)
+
+
+def test_a_point_no_camera_detects_is_measured_from_the_dots_found(quiet):
+    """Marker M undetected in every camera for 12 frames, its dot in the images: found and measured.
+
+    Without the search, patches carry it for a few frames and then it is lost
+    (test_tracking.py::test_patch_tracking_alone_stops_after_a_few_frames).
+    """
+    sc = _undetected(quiet)
+    images = rendered(sc, lambda s, f: (M,) if 3 <= f < 15 else ())
+    before = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    stack = UndoStack(sc.project)
+    stack.push(track(sc.project, 0, 1, end_frame=19, images=images))
+    p = marker_point(sc, M)
+    blobs = (p.src[3:15] == SRC_DETECTION).sum(1)
+    assert np.all(blobs >= 2), blobs
+    err = np.linalg.norm(p.pos[3:15] - sc.face[3:15, M], axis=1)
+    assert np.all(err < 0.3), err
+    # The dots found are the frame's detections now, and the samples point at them.
+    for f in range(3, 15):
+        for s in np.flatnonzero(p.src[f] == SRC_DETECTION):
+            rec = sc.project.detections[s].frame(f)
+            d = rec[p.det[f, s]]
+            assert np.hypot(d["x"] - p.uv[f, s, 0], d["y"] - p.uv[f, s, 1]) < 1e-3
+    after = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    assert sum(after) - sum(before) >= 2 * 12
+    stack.undo()
+    assert [sc.project.detections[s].count(f) for f in range(20) for s in range(4)] == before
+
+
+def test_without_the_search_the_point_is_lost(quiet):
+    """The same take with Search Missing Views off: no dot is added and the point is lost."""
+    sc = _undetected(quiet)
+    sc.project.properties.set("tracking.search_missing_views", False)
+    images = rendered(sc, lambda s, f: (M,) if 3 <= f < 15 else ())
+    before = sum(sc.project.detections[s].count(f) for f in range(20) for s in range(4))
+    track(sc.project, 0, 1, end_frame=19, images=images).do(sc.project)
+    p = marker_point(sc, M)
+    assert np.all(p.status[9:15] == ST_NONE)
+    assert sum(sc.project.detections[s].count(f) for f in range(20) for s in range(4)) == before
+
+
+def test_a_dot_one_camera_shows_is_not_enough(quiet):
+    """Marker M undetected everywhere and drawn in one camera only: one view cannot make the point whole."""
+    sc = _undetected(quiet)
+    s1 = next(s for s in range(4) if quiet.face_det[5, s, M] >= 0)
+    images = rendered(sc, lambda s, f: (M,) if s == s1 and 3 <= f < 15 else ())
+    before = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    track(sc.project, 0, 1, end_frame=19, images=images).do(sc.project)
+    p = marker_point(sc, M)
+    assert not np.any((p.src[9:15] == SRC_DETECTION).sum(1) >= 2)
+    assert [sc.project.detections[s].count(f) for f in range(20) for s in range(4)] == before
+
+
+@pytest.mark.parametrize("offset,cameras,taken", [(1.8, 4, False), (1.0, 2, False), (0.3, 2, True)])
+def test_dots_are_taken_only_where_their_views_meet_near_the_prediction(quiet, offset, cameras, taken):
+    """Marker M's dot drawn ``offset`` mm from it on the face, in up to ``cameras`` of the cameras that see it.
+
+    Views of one 3-D place meet, so only the distance from the prediction turns them down: :data:`MEET_MM`
+    for three or more views, :data:`PAIR_MEET_MM` for two.  (1.8 mm lies 4-5 px from the prediction's
+    projection, within the search's reach.  No patch tracking: a patch would follow the marker's look onto
+    the drawn dot on the first frames, before any search.)
+    """
+    assert PAIR_MEET_MM < 1.0 < MEET_MM < 1.8
+    sc = _undetected(quiet)
+    sc.project.properties.set("tracking.patch_match_threshold", 1.0)
+    normal = np.mean([c.position for c in sc.cameras[0]], axis=0) - sc.face[0, M]
+    side = np.cross(normal, [0.0, 0.0, 1.0])
+    side *= offset / np.linalg.norm(side)
+    drawn = [s for s in range(4) if np.all(quiet.face_det[3:15, s, M] >= 0)][:cameras]
+    assert len(drawn) >= 2
+
+    def images(s, f, base=rendered(sc)):
+        img = base(s, f).copy()
+        if 3 <= f < 15 and s in drawn:
+            x, y = sc.cameras[f][s].project((sc.face[f, M] + side)[None])[0]
+            cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 16 * 4, 30, -1, cv2.LINE_AA, 4)
+        return img
+    before = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    track(sc.project, 0, 1, end_frame=19, images=images).do(sc.project)
+    p = marker_point(sc, M)
+    blobs = (p.src[3:15] == SRC_DETECTION).sum(1)
+    after = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    if taken:
+        assert np.all(blobs >= 2)
+        err = np.linalg.norm(p.pos[3:15] - sc.face[3:15, M], axis=1)
+        assert np.all(err < offset + 0.3), err
+        assert sum(after) > sum(before)
+    else:
+        assert not np.any(blobs >= 2)
+        assert after == before
