@@ -44,7 +44,7 @@ def test_dots_are_found_in_crops_where_they_are():
     # Searched 2-3 px from each dot (the prediction is off), and once over bare skin.
     asked = centres + np.array([[2.0, -1.0], [-1.5, 2.0], [0.5, 2.5]])
     asked = np.vstack([asked, [[200.0, 60.0]]])
-    rec, which = find_in_crops(img, asked, white=False)
+    rec, which = find_in_crops([img], asked, np.zeros(len(asked), int), white=False)
     assert sorted(which.tolist()) == [0, 1, 2]
     for k in range(3):
         got = np.array([rec["x"][which == k][0], rec["y"][which == k][0]], float)

@@ -51,41 +51,38 @@ SCORE = 1e-6
 MIN_MAJOR, MAX_MAJOR = 2.0, 25.0
 
 
-def searched(rig: RigState, X: np.ndarray, near: np.ndarray, seen: np.ndarray) -> tuple:
-    """Which views to search: ``(rows, sensors, raw uv)`` of points ``X`` (N, 3).
+def searched(rig: RigState, uv_c: np.ndarray, near: np.ndarray, seen: np.ndarray) -> tuple:
+    """Which views to search: ``(rows, sensors, raw uv)`` of the points projected to ``uv_c`` (N, S, 2).
 
     ``near`` (N, S) bool: a detection within :data:`NEAR_PX` of the projection.  ``seen`` (N, S) bool: the
     view had a blob on some frame before (a camera that never saw the marker is not searched).  Views whose
     crop would reach past the image's edge are not searched either.
     """
-    want = (near.sum(1) < 2)[:, None] & ~near & seen & np.all(np.isfinite(X), axis=1)[:, None]
+    want = (near.sum(1) < 2)[:, None] & ~near & seen & np.all(np.isfinite(uv_c), axis=2)
     rows, sens = np.nonzero(want)
-    if len(rows) == 0:
-        return rows, sens, np.zeros((0, 2))
-    uv_c = rig.project(X[rows])[np.arange(len(rows)), sens]
-    raw = np.full_like(uv_c, np.nan)
+    raw = np.zeros((len(rows), 2))
     for s in np.unique(sens):
         at = sens == s
-        ok = at & np.all(np.isfinite(uv_c), axis=1)
-        if np.any(ok):
-            raw[ok] = rig.cameras[s].distort(uv_c[ok])
-    W, H = np.array([rig.cameras[s].sensor_size for s in range(rig.S)], float)[sens].T
+        raw[at] = rig.cameras[s].distort(uv_c[rows[at], s])
+    W, H = np.array([rig.cameras[s].sensor_size for s in range(rig.S)], float)[sens].T.reshape(2, -1)
     inside = np.all(np.isfinite(raw), axis=1) & (raw[:, 0] >= TILE_R) & (raw[:, 0] < W - TILE_R) \
         & (raw[:, 1] >= TILE_R) & (raw[:, 1] < H - TILE_R)
     return rows[inside], sens[inside], raw[inside]
 
 
-def find_in_crops(image: np.ndarray, uv: np.ndarray, white: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Dots near each of ``uv`` (n, 2) raw px in one camera's ``image``: one detection over a mosaic of crops.
+def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, white: bool) -> tuple[np.ndarray,
+                                                                                                np.ndarray]:
+    """Dots near each of ``uv`` (n, 2) raw px in image ``images[src]``: one detection over a mosaic of crops.
 
-    Each crop (``2 TILE_R + 1`` px square about its ``uv``) is enlarged twice; the mosaic of all of them is
-    detected once (a call per crop would cost the detector's fixed overhead each time).
+    Each crop (``2 TILE_R + 1`` px square about its ``uv``) is enlarged twice; the mosaic of all of them, of
+    every camera, is detected once (the detector's fixed cost, ~4 ms, would otherwise be paid per crop or per
+    camera).
 
     Returns
     -------
     rec : ndarray of DET_DTYPE
-        The dots within :data:`REACH_PX` of their crop's centre, in the image's raw px, the centre taken
-        again from the dot's edge at the image's own resolution.
+        The dots within :data:`REACH_PX` of their crop's centre, in their image's raw px, the centre taken
+        again from the dot's edge at the image's own resolution and corrected by the detector's step 9.
     which : ndarray (len(rec),) int
         The index into ``uv`` each was found for.
     """
@@ -101,44 +98,40 @@ def find_in_crops(image: np.ndarray, uv: np.ndarray, white: bool) -> tuple[np.nd
     rows = -(-n // cols)
     mosaic = np.zeros((rows * 2 * T, cols * 2 * T), np.uint8)
     origin = np.rint(uv).astype(int) - TILE_R
-    H, W = image.shape
     for k in range(n):
+        image = images[src[k]]
+        H, W = image.shape
         ys = np.clip(np.arange(origin[k, 1], origin[k, 1] + T), 0, H - 1)
         xs = np.clip(np.arange(origin[k, 0], origin[k, 0] + T), 0, W - 1)
-        crop = image[np.ix_(ys, xs)]
         r, c = divmod(k, cols)
         mosaic[r * 2 * T:(r + 1) * 2 * T, c * 2 * T:(c + 1) * 2 * T] = cv2.resize(
-            crop, (2 * T, 2 * T), interpolation=cv2.INTER_CUBIC)
+            image[np.ix_(ys, xs)], (2 * T, 2 * T), interpolation=cv2.INTER_CUBIC)
     rec = detect(mosaic, white=white, threshold=SCORE, min_major=2 * MIN_MAJOR, max_major=2 * MAX_MAJOR)
-    if len(rec) == 0:
-        return rec, np.zeros(0, int)
     x2, y2 = rec["x"].astype(float), rec["y"].astype(float)
     c, r = (x2 // (2 * T)).astype(int), (y2 // (2 * T)).astype(int)
     k = r * cols + c
-    ok = k < n
-    rec, k, x2, y2, c, r = rec[ok], k[ok], x2[ok], y2[ok], c[ok], r[ok]
     # cv2.resize's pixel u of the enlarged crop is the crop's (u + 0.5) / 2 - 0.5.
-    x = origin[k, 0] + (x2 - c * 2 * T + 0.5) / 2.0 - 0.5
-    y = origin[k, 1] + (y2 - r * 2 * T + 0.5) / 2.0 - 0.5
-    keep = np.hypot(x - uv[k, 0], y - uv[k, 1]) <= REACH_PX
+    x = origin[np.minimum(k, n - 1), 0] + (x2 - c * 2 * T + 0.5) / 2.0 - 0.5
+    y = origin[np.minimum(k, n - 1), 1] + (y2 - r * 2 * T + 0.5) / 2.0 - 0.5
+    keep = (k < n) & (np.hypot(x - uv[np.minimum(k, n - 1), 0], y - uv[np.minimum(k, n - 1), 1]) <= REACH_PX)
     rec, k, x, y = rec[keep], k[keep], x[keep], y[keep]
     out = np.zeros(len(rec), DET_DTYPE)
-    major, minor = rec["major"].astype(float) / 2.0, rec["minor"].astype(float) / 2.0
-    angle = rec["angle"].astype(float)
-    out["major"], out["minor"], out["angle"] = major, minor, angle
-    if len(out):
+    out["major"], out["minor"] = rec["major"].astype(float) / 2.0, rec["minor"].astype(float) / 2.0
+    out["angle"], out["score"], out["color"] = rec["angle"], rec["score"], rec["color"]
+    net = default_model(white).centre if LEARNED_CENTRES else None
+    for i in np.unique(src[k]):
+        at = src[k] == i
+        image = images[i]
         bright = image if white else cv2.bitwise_not(image)
         # The enlarged crop's centres are 0.6-0.8 px off on lower-lip dots, their edge at the image's own
         # pixels 0.3 px (docs/tracking.md, "Session 38"); and the detector's step 9 there takes a fifth more
         # off (docs/tracking.md, "Session 41").
-        x, y, _ = refine_centres(bright, x, y, major, minor, angle, flat=not white, trust=np.zeros(len(out)))
-        net = default_model(white).centre
-        if LEARNED_CENTRES and net is not None:
-            out["x"], out["y"] = x, y
-            x, y = corrected_centres(bright, out, noise_sigma(image), net)
-    out["x"], out["y"] = x, y
-    out["score"] = rec["score"]
-    out["color"] = rec["color"]
+        o = out[at]
+        o["x"], o["y"], _ = refine_centres(bright, x[at], y[at], o["major"], o["minor"], o["angle"], flat=not white,
+                                           trust=np.zeros(len(o)))
+        if net is not None:
+            o["x"], o["y"] = corrected_centres(bright, o, noise_sigma(image), net)
+        out[at] = o
     return out, k
 
 
@@ -178,36 +171,35 @@ def look_again(rig: RigState, images, X: np.ndarray, recs: list[np.ndarray], xy_
         if len(xy_c[s]) == 0 or not np.any(ok):
             continue
         dj, j = cKDTree(xy_c[s]).query(uv_c[ok, s], distance_upper_bound=REACH_PX)
-        rows = np.flatnonzero(ok)
-        near[rows, s] = dj <= NEAR_PX
+        at = np.flatnonzero(ok)
+        near[at, s] = dj <= NEAR_PX
         has = np.isfinite(dj)
-        best[rows[has], s] = xy_c[s][j[has]]
+        best[at[has], s] = xy_c[s][j[has]]
     colour = np.concatenate([r["color"] for r in recs])
     if len(colour) == 0:
         return None
     # The take's markers' colour: that of most of the frame's detections.
     white = bool(np.count_nonzero(colour == COLOR_WHITE) * 2 > len(colour))
-    rows, sens, raw = searched(rig, X, near, seen)
+    rows, sens, raw = searched(rig, uv_c, near, seen)
     if len(rows) == 0:
         return None
     found = np.full((N, S), -1)                # index into that sensor's found records
     cand = best.copy()
     per: list[np.ndarray] = [np.zeros(0, DET_DTYPE)] * S
-    for s in np.unique(sens):
-        at = np.flatnonzero(sens == s)
-        rec, k = find_in_crops(images(int(s)), raw[at], white)
-        if len(rec) == 0:
-            continue
+    cams = np.unique(sens)
+    got, k = find_in_crops([images(int(s)) for s in cams], raw, np.searchsorted(cams, sens), white)
+    for s in cams:
+        mine = sens[k] == s
+        rec, ks = got[mine], k[mine]
         # Not a dot the frame's detections already have.
-        if len(recs[s]):
-            d = np.hypot(rec["x"][:, None] - recs[s]["x"][None, :].astype(float),
-                         rec["y"][:, None] - recs[s]["y"][None, :].astype(float))
-            new = d.min(axis=1) > SAME_PX
-            rec, k = rec[new], k[new]
+        if len(rec) and len(recs[s]):
+            d = cKDTree(np.column_stack([recs[s]["x"], recs[s]["y"]]).astype(float)).query(
+                np.column_stack([rec["x"], rec["y"]]).astype(float))[0]
+            rec, ks = rec[d > SAME_PX], ks[d > SAME_PX]
         if len(rec) == 0:
             continue
         c = rig.correct(int(s), np.column_stack([rec["x"], rec["y"]]).astype(float))
-        pts = rows[at[k]]
+        pts = rows[ks]
         # The dot nearest the projection, per point.
         dist = np.hypot(c[:, 0] - uv_c[pts, s, 0], c[:, 1] - uv_c[pts, s, 1])
         order = np.lexsort((dist, pts))
