@@ -210,22 +210,7 @@ def look_again(rig: RigState, images, X: np.ndarray, recs: list[np.ndarray], xy_
     use = np.flatnonzero(np.any(found >= 0, axis=1))
     if len(use) == 0:
         return None
-    uvs = cand[use]
-    valid = np.all(np.isfinite(uvs), axis=2)
-    for _ in range(S - 1):
-        Xn = triangulate(rig, uvs, valid)
-        err = np.where(valid, reprojection(rig, Xn, uvs, valid), 0.0)
-        worst = np.argmax(err, axis=1)
-        drop = (valid.sum(1) > 2) & (err[np.arange(len(use)), worst] > VIEW_PX)
-        if not np.any(drop):
-            break
-        valid[np.flatnonzero(drop), worst[drop]] = False
-    Xn = triangulate(rig, uvs, valid)
-    err = np.where(valid, reprojection(rig, Xn, uvs, valid), 0.0)
-    nv = valid.sum(1)
-    dpred = np.linalg.norm(Xn - X[use], axis=1)
-    ok = (nv >= 2) & np.all(err <= VIEW_PX, axis=1) \
-        & (dpred <= np.where(nv >= 3, MEET_MM, PAIR_MEET_MM))
+    ok, valid = meeting(rig, cand[use], X[use])
     add = []
     any_added = False
     for s in range(S):
@@ -235,6 +220,31 @@ def look_again(rig: RigState, images, X: np.ndarray, recs: list[np.ndarray], xy_
         add.append(per[s][j] if len(j) else np.zeros(0, DET_DTYPE))
         any_added |= len(j) > 0
     return add if any_added else None
+
+
+def meeting(rig: RigState, uv_c: np.ndarray, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which points' views meet: ``(ok (n,), views (n, S))`` of views ``uv_c`` (n, S, 2; NaN none) near ``pred`` (n, 3).
+
+    The worst view is dropped while more than two remain and one misses the others' point by more than
+    :data:`VIEW_PX`; a point is ``ok`` where two or more views are left, each within :data:`VIEW_PX`, and
+    their point lies within :data:`MEET_MM` of ``pred`` (:data:`PAIR_MEET_MM` for two views).
+    """
+    n, S = uv_c.shape[:2]
+    valid = np.all(np.isfinite(uv_c), axis=2)
+    for _ in range(S - 1):
+        X = triangulate(rig, uv_c, valid)
+        err = np.where(valid, reprojection(rig, X, uv_c, valid), 0.0)
+        worst = np.argmax(err, axis=1)
+        drop = (valid.sum(1) > 2) & (err[np.arange(n), worst] > VIEW_PX)
+        if not np.any(drop):
+            break
+        valid[np.flatnonzero(drop), worst[drop]] = False
+    X = triangulate(rig, uv_c, valid)
+    err = np.where(valid, reprojection(rig, X, uv_c, valid), 0.0)
+    nv = valid.sum(1)
+    ok = (nv >= 2) & np.all(err <= VIEW_PX, axis=1) \
+        & (np.linalg.norm(X - pred, axis=1) <= np.where(nv >= 3, MEET_MM, PAIR_MEET_MM))
+    return ok, valid
 
 
 def appended(recs: list[np.ndarray], found: list[np.ndarray] | None) -> list[np.ndarray]:
