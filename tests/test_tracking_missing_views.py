@@ -142,3 +142,23 @@ def test_dots_are_taken_only_where_their_views_meet_near_the_prediction(quiet, o
     else:
         assert not np.any(blobs >= 2)
         assert after == before
+
+
+@pytest.mark.parametrize("learned", [True, False])
+def test_the_found_dots_follow_the_learned_centre_property(quiet, monkeypatch, learned):
+    """Blob Parameters > Learned Centre Correction reaches the search: its dots are measured as the detections were."""
+    import carapost.core.tracking.missing_views as mv
+
+    asked = []
+    real = mv.find_in_crops
+
+    def spy(images, uv, src, white, learned_centres=True):
+        asked.append(learned_centres)
+        return real(images, uv, src, white, learned_centres)
+    monkeypatch.setattr(mv, "find_in_crops", spy)
+    sc = _undetected(quiet)
+    sc.project.properties.set("blob.learned_centres", learned)
+    track(sc.project, 0, 1, end_frame=8, images=rendered(sc, lambda s, f: (M,) if 3 <= f < 15 else ())).do(sc.project)
+    assert asked and set(asked) == {learned}
+    p = marker_point(sc, M)
+    assert np.all((p.src[3:9] == SRC_DETECTION).sum(1) >= 2)

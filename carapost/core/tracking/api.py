@@ -172,7 +172,8 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
         source = image
     tracker = FrameTracker(RigState(project.rig.cameras_at(start)), X0, uv0, size0, brim, params,
                            images=source, pool=pool, start_frame=start,
-                           brim_radius=project.brim.radius if len(brim) else None)
+                           brim_radius=project.brim.radius if len(brim) else None,
+                           learned_centres=bool(project.properties["blob.learned_centres"]))
     results, cancelled = [], False
     face_ids = np.array([q.id for q in face], np.int64)
     brim_ids = np.array([q.id for q in brim_pts.values()], np.int64)

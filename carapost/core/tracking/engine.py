@@ -367,12 +367,16 @@ class FrameTracker(NewPoints):
     pool : PatchPool, optional
     start_frame : int, optional
         The frame of ``uv0``: its blob samples (``size0`` known) are the first patch templates.
+    learned_centres : bool
+        Whether the dots Search Missing Views finds get the detector's step 9 (Blob Parameters > Learned Centre
+        Correction), as the frame's own detections did.
     """
 
     def __init__(self, rig: RigState, X0, uv0, size0, brim, params: TrackingParams, images=None, pool=None,
-                 start_frame: int | None = None, brim_radius=None):
+                 start_frame: int | None = None, brim_radius=None, learned_centres: bool = True):
         self.rig = rig
         self.p = params
+        self.learned_centres = learned_centres       # Search Missing Views' dots: the Blob Parameter's step 9
         self.images = images
         self.pool = pool or patch.PatchPool(1)
         self.S = rig.S
@@ -594,7 +598,8 @@ class FrameTracker(NewPoints):
         # elastic prediction is where the dots are, a point's own motion is not.
         extra = None
         if p.search_missing_views and self.images is not None:
-            extra = missing_views.look_again(rig, lambda s: self._image(s, frame), X2, recs, fd.xy, self.seen)
+            extra = missing_views.look_again(rig, lambda s: self._image(s, frame), X2, recs, fd.xy, self.seen,
+                                             self.learned_centres)
             if extra is not None:
                 # Appended after each sensor's own records: the brim's and the anchors' matches keep their indices.
                 recs = missing_views.appended(recs, extra)

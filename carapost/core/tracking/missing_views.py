@@ -70,25 +70,28 @@ def searched(rig: RigState, uv_c: np.ndarray, near: np.ndarray, seen: np.ndarray
     return rows[inside], sens[inside], raw[inside]
 
 
-def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, white: bool) -> tuple[np.ndarray,
-                                                                                                np.ndarray]:
+def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, white: bool,
+                  learned_centres: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Dots near each of ``uv`` (n, 2) raw px in image ``images[src]``: one detection over a mosaic of crops.
 
     Each crop (``2 TILE_R + 1`` px square about its ``uv``) is enlarged twice; the mosaic of all of them, of
     every camera, is detected once (the detector's fixed cost, ~4 ms, would otherwise be paid per crop or per
     camera).
 
+    ``learned_centres``: whether the detector's step 9 corrects the centres (Blob Parameters > Learned Centre
+    Correction).
+
     Returns
     -------
     rec : ndarray of DET_DTYPE
         The dots within :data:`REACH_PX` of their crop's centre, in their image's raw px, the centre taken
-        again from the dot's edge at the image's own resolution and corrected by the detector's step 9.
+        again from the dot's edge at the image's own resolution (and corrected by step 9).
     which : ndarray (len(rec),) int
         The index into ``uv`` each was found for.
     """
     from ..blobs import detect
     from ..blobs.centre_net import corrected_centres
-    from ..blobs.detector import LEARNED_CENTRES, default_model
+    from ..blobs.detector import default_model
     from ..blobs.edges import refine_centres
     from ..blobs.features import noise_sigma
 
@@ -106,7 +109,8 @@ def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, whi
         r, c = divmod(k, cols)
         mosaic[r * 2 * T:(r + 1) * 2 * T, c * 2 * T:(c + 1) * 2 * T] = cv2.resize(
             image[np.ix_(ys, xs)], (2 * T, 2 * T), interpolation=cv2.INTER_CUBIC)
-    rec = detect(mosaic, white=white, threshold=SCORE, min_major=2 * MIN_MAJOR, max_major=2 * MAX_MAJOR)
+    rec = detect(mosaic, white=white, threshold=SCORE, min_major=2 * MIN_MAJOR, max_major=2 * MAX_MAJOR,
+                 learned_centres=learned_centres)
     x2, y2 = rec["x"].astype(float), rec["y"].astype(float)
     c, r = (x2 // (2 * T)).astype(int), (y2 // (2 * T)).astype(int)
     k = r * cols + c
@@ -118,7 +122,7 @@ def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, whi
     out = np.zeros(len(rec), DET_DTYPE)
     out["major"], out["minor"] = rec["major"].astype(float) / 2.0, rec["minor"].astype(float) / 2.0
     out["angle"], out["score"], out["color"] = rec["angle"], rec["score"], rec["color"]
-    net = default_model(white).centre if LEARNED_CENTRES else None
+    net = default_model(white).centre if learned_centres else None
     for i in np.unique(src[k]):
         at = src[k] == i
         image = images[i]
@@ -136,7 +140,7 @@ def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, whi
 
 
 def look_again(rig: RigState, images, X: np.ndarray, recs: list[np.ndarray], xy_c: list[np.ndarray],
-               seen: np.ndarray) -> list[np.ndarray] | None:
+               seen: np.ndarray, learned_centres: bool = True) -> list[np.ndarray] | None:
     """Dots the frame's detections lack that make points of ``X`` whole: records to add, per sensor.
 
     Parameters
@@ -153,6 +157,8 @@ def look_again(rig: RigState, images, X: np.ndarray, recs: list[np.ndarray], xy_
         The same, in corrected px.
     seen : ndarray (N, S) bool
         Views that had a blob on some frame before.
+    learned_centres : bool
+        As :func:`find_in_crops`.
 
     Returns
     -------
@@ -187,7 +193,7 @@ def look_again(rig: RigState, images, X: np.ndarray, recs: list[np.ndarray], xy_
     cand = best.copy()
     per: list[np.ndarray] = [np.zeros(0, DET_DTYPE)] * S
     cams = np.unique(sens)
-    got, k = find_in_crops([images(int(s)) for s in cams], raw, np.searchsorted(cams, sens), white)
+    got, k = find_in_crops([images(int(s)) for s in cams], raw, np.searchsorted(cams, sens), white, learned_centres)
     for s in cams:
         mine = sens[k] == s
         rec, ks = got[mine], k[mine]
