@@ -210,7 +210,7 @@ def track(project, start_frame: int, direction: int = +1, end_frame: int | None 
         cancelled = True
     finally:
         pool.close()
-    cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd, fill, recs_of)
+    cmd = _command(project, name, face, brim_pts, brim, results, detect_cmd, recs_of, fill)
     cmd.cancelled = cancelled
     if unmade:
         cmd.summary += (f"; no points made for new markers: {left_out} face point(s) not tracked (not selected, "
@@ -310,7 +310,7 @@ def _publish(progress: Progress, r, face_ids: np.ndarray, brim_ids: np.ndarray, 
         cameras=(r.R, r.C)))
 
 
-def _command(project, name, face, brim_pts, brim, results, detect_cmd, fill=None, recs_of=None) -> Command:
+def _command(project, name, face, brim_pts, brim, results, detect_cmd, recs_of, fill=None) -> Command:
     S = project.sensor_count
     cmds: list[Command] = []
     if detect_cmd is not None:
