@@ -63,7 +63,7 @@ def test_a_point_no_camera_detects_is_measured_from_the_dots_found(quiet):
     images = rendered(sc, lambda s, f: (M,) if 3 <= f < 15 else ())
     before = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
     stack = UndoStack(sc.project)
-    stack.push(track(sc.project, 0, 1, end_frame=19, images=images))
+    cmd = stack.push(track(sc.project, 0, 1, end_frame=19, images=images))
     p = marker_point(sc, M)
     blobs = (p.src[3:15] == SRC_DETECTION).sum(1)
     assert np.all(blobs >= 2), blobs
@@ -77,6 +77,9 @@ def test_a_point_no_camera_detects_is_measured_from_the_dots_found(quiet):
             assert np.hypot(d["x"] - p.uv[f, s, 0], d["y"] - p.uv[f, s, 1]) < 1e-3
     after = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
     assert sum(after) - sum(before) >= 2 * 12
+    # The log says how many (Log pane, carapost process's stderr).
+    assert cmd.report["found_dots"] == sum(after) - sum(before)
+    assert f"; {sum(after) - sum(before)} dots found by Search Missing Views" in cmd.summary
     stack.undo()
     assert [sc.project.detections[s].count(f) for f in range(20) for s in range(4)] == before
 

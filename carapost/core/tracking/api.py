@@ -358,12 +358,14 @@ def _command(project, name, face, brim_pts, brim, results, detect_cmd, recs_of, 
     cmd = CompoundCommand(name, cmds)
     frames = [r.frame for r in results]
     added = sum(r.new for r in results)
+    dots = sum(len(a) for r in results if r.found is not None for a in r.found)
     cmd.report = {"frames": n, "first": frames[0] if frames else None, "last": frames[-1] if frames else None,
-                  "points": len(face), "new_points": added, "tracked_per_frame": per_frame}
+                  "points": len(face), "new_points": added, "tracked_per_frame": per_frame, "found_dots": dots}
     mean = float(np.mean(per_frame)) / max(1, len(face) + added) if per_frame else 0.0
     cmd.summary = (f"{name}: {n} frames, {len(face)} face points, {100 * mean:.1f}% of point-frames tracked"
                    + (f" (frames {frames[0]}-{frames[-1]})" if frames else "")
-                   + (f"; {added} new points for markers no point followed" if added else ""))
+                   + (f"; {added} new points for markers no point followed" if added else "")
+                   + (f"; {dots} dots found by Search Missing Views" if dots else ""))
     return cmd
 
 
