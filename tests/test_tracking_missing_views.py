@@ -165,3 +165,27 @@ def test_the_found_dots_follow_the_learned_centre_property(quiet, monkeypatch, l
     assert asked and set(asked) == {learned}
     p = marker_point(sc, M)
     assert np.all((p.src[3:9] == SRC_DETECTION).sum(1) >= 2)
+
+
+def test_a_cancelled_run_keeps_the_dots_of_the_frames_done_and_undoes_them(quiet):
+    """Cancelled on frame 8: the dots found on frames 3-8 are in the one undoable step, none after, and undo
+    gives the project back as it was (its digest)."""
+    from carapost.core.progress import Progress
+
+    sc = _undetected(quiet)
+    pr = sc.project
+    stack = UndoStack(pr)
+    d0 = pr.digest()
+    before = [[pr.detections[s].count(f) for f in range(20)] for s in range(4)]
+    prog = Progress()
+    prog._callback = lambda done, total, msg: prog.cancel() if done >= 8 else None
+    cmd = track(pr, 0, 1, end_frame=19, images=rendered(sc, lambda s, f: (M,) if 3 <= f < 15 else ()), progress=prog)
+    assert pr.digest() == d0 and cmd.cancelled and cmd.report["frames"] == 8
+    stack.push(cmd)
+    added = [[pr.detections[s].count(f) - before[s][f] for f in range(20)] for s in range(4)]
+    per_frame = np.sum(added, axis=0)
+    assert np.all(per_frame[3:9] >= 2) and not np.any(per_frame[9:])
+    assert cmd.report["found_dots"] == int(per_frame.sum())
+    stack.undo()
+    assert pr.digest() == d0
+    assert [[pr.detections[s].count(f) for f in range(20)] for s in range(4)] == before
