@@ -34,6 +34,11 @@ def _undetected(quiet, frames=range(3, 15)):
     return sc
 
 
+def _counts(sc):
+    """Every frame's detection count, per camera (20 frames)."""
+    return [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+
+
 def test_dots_are_found_in_crops_where_they_are():
     """Discs at known sub-pixel centres are found within a tenth of a pixel, each for its own crop."""
     rng = np.random.default_rng(3)
@@ -61,7 +66,7 @@ def test_a_point_no_camera_detects_is_measured_from_the_dots_found(quiet):
     """
     sc = _undetected(quiet)
     images = rendered(sc, lambda s, f: (M,) if 3 <= f < 15 else ())
-    before = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    before = _counts(sc)
     stack = UndoStack(sc.project)
     cmd = stack.push(track(sc.project, 0, 1, end_frame=19, images=images))
     p = marker_point(sc, M)
@@ -75,13 +80,13 @@ def test_a_point_no_camera_detects_is_measured_from_the_dots_found(quiet):
             rec = sc.project.detections[s].frame(f)
             d = rec[p.det[f, s]]
             assert np.hypot(d["x"] - p.uv[f, s, 0], d["y"] - p.uv[f, s, 1]) < 1e-3
-    after = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    after = _counts(sc)
     assert sum(after) - sum(before) >= 2 * 12
     # The log says how many (Log pane, carapost process's stderr).
     assert cmd.report["found_dots"] == sum(after) - sum(before)
     assert f"; {sum(after) - sum(before)} dots found by Search Missing Views" in cmd.summary
     stack.undo()
-    assert [sc.project.detections[s].count(f) for f in range(20) for s in range(4)] == before
+    assert _counts(sc) == before
 
 
 def test_without_the_search_the_point_is_lost(quiet):
@@ -89,11 +94,11 @@ def test_without_the_search_the_point_is_lost(quiet):
     sc = _undetected(quiet)
     sc.project.properties.set("tracking.search_missing_views", False)
     images = rendered(sc, lambda s, f: (M,) if 3 <= f < 15 else ())
-    before = sum(sc.project.detections[s].count(f) for f in range(20) for s in range(4))
+    before = sum(_counts(sc))
     track(sc.project, 0, 1, end_frame=19, images=images).do(sc.project)
     p = marker_point(sc, M)
     assert np.all(p.status[9:15] == ST_NONE)
-    assert sum(sc.project.detections[s].count(f) for f in range(20) for s in range(4)) == before
+    assert sum(_counts(sc)) == before
 
 
 def test_a_dot_one_camera_shows_is_not_enough(quiet):
@@ -101,11 +106,11 @@ def test_a_dot_one_camera_shows_is_not_enough(quiet):
     sc = _undetected(quiet)
     s1 = next(s for s in range(4) if quiet.face_det[5, s, M] >= 0)
     images = rendered(sc, lambda s, f: (M,) if s == s1 and 3 <= f < 15 else ())
-    before = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    before = _counts(sc)
     track(sc.project, 0, 1, end_frame=19, images=images).do(sc.project)
     p = marker_point(sc, M)
     assert not np.any((p.src[9:15] == SRC_DETECTION).sum(1) >= 2)
-    assert [sc.project.detections[s].count(f) for f in range(20) for s in range(4)] == before
+    assert _counts(sc) == before
 
 
 @pytest.mark.parametrize("offset,cameras,taken", [(1.8, 4, False), (1.0, 2, False), (0.3, 2, True)])
@@ -132,11 +137,11 @@ def test_dots_are_taken_only_where_their_views_meet_near_the_prediction(quiet, o
             x, y = sc.cameras[f][s].project((sc.face[f, M] + side)[None])[0]
             cv2.circle(img, (int(round(x * 16)), int(round(y * 16))), 16 * 4, 30, -1, cv2.LINE_AA, 4)
         return img
-    before = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    before = _counts(sc)
     track(sc.project, 0, 1, end_frame=19, images=images).do(sc.project)
     p = marker_point(sc, M)
     blobs = (p.src[3:15] == SRC_DETECTION).sum(1)
-    after = [sc.project.detections[s].count(f) for f in range(20) for s in range(4)]
+    after = _counts(sc)
     if taken:
         assert np.all(blobs >= 2)
         err = np.linalg.norm(p.pos[3:15] - sc.face[3:15, M], axis=1)

@@ -114,10 +114,11 @@ def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, whi
     x2, y2 = rec["x"].astype(float), rec["y"].astype(float)
     c, r = (x2 // (2 * T)).astype(int), (y2 // (2 * T)).astype(int)
     k = r * cols + c
+    tile = np.minimum(k, n - 1)                 # the mosaic's last row may have empty places (k >= n)
     # cv2.resize's pixel u of the enlarged crop is the crop's (u + 0.5) / 2 - 0.5.
-    x = origin[np.minimum(k, n - 1), 0] + (x2 - c * 2 * T + 0.5) / 2.0 - 0.5
-    y = origin[np.minimum(k, n - 1), 1] + (y2 - r * 2 * T + 0.5) / 2.0 - 0.5
-    keep = (k < n) & (np.hypot(x - uv[np.minimum(k, n - 1), 0], y - uv[np.minimum(k, n - 1), 1]) <= REACH_PX)
+    x = origin[tile, 0] + (x2 - c * 2 * T + 0.5) / 2.0 - 0.5
+    y = origin[tile, 1] + (y2 - r * 2 * T + 0.5) / 2.0 - 0.5
+    keep = (k < n) & (np.hypot(x - uv[tile, 0], y - uv[tile, 1]) <= REACH_PX)
     rec, k, x, y = rec[keep], k[keep], x[keep], y[keep]
     out = np.zeros(len(rec), DET_DTYPE)
     out["major"], out["minor"] = rec["major"].astype(float) / 2.0, rec["minor"].astype(float) / 2.0
