@@ -143,7 +143,7 @@ def one(markers: int, seed: int, frames: int, white: bool = False) -> dict:
             return {"error": f"carapost process returned {rc}"}
         truth = dict(np.load(d / "truth.npz"))
         single = single_sensor_samples(load_project(d / "Sample.cara"))
-        r = score_c3d(d / "Sample.c3d", truth, faint_by_camera(markers, seed, white), single)
+        r = score_c3d(d / "Sample.c3d", truth, faint_by_camera(markers, seed, white, frames=frames), single)
         r["process_s"] = round(seconds, 1)
         return r
 

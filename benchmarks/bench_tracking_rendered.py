@@ -210,7 +210,7 @@ def one(markers: int, seed: int, frames: int, directions=(+1, -1), white: bool =
         project, doc, truth = open_sample_take(d, markers, 0, frames - 1)
         t2 = time.perf_counter()
         images = TakeFrames(project)
-        faint = faint_by_camera(markers, seed, white)
+        faint = faint_by_camera(markers, seed, white, frames=frames)
         detected = doc.stack.index
         for direction in directions:
             doc.stack.set_index(detected)

@@ -44,7 +44,7 @@ def test_process_a_sample_take(tmp_path):
         "bench_process", Path(__file__).resolve().parents[1] / "benchmarks" / "bench_process.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    faint = faint_by_camera(35, 1)
+    faint = faint_by_camera(35, 1, frames=12)
     single = bench.single_sensor_samples(p)
     r = bench.score_c3d(tmp_path / "out.c3d", dict(np.load(tmp_path / "truth.npz")), faint, single)
     assert r["coverage"] >= 0.995 and r["swapped_points"] == 0 and r["rms_mm"] <= 0.1, r

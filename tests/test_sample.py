@@ -413,3 +413,21 @@ def test_bad_parameters(tmp_path):
         write_sample(tmp_path, frames=0)
     with pytest.raises(CaraError):
         write_sample(tmp_path, width=641, height=360, frames=1)
+
+
+def test_frames_rendered_again_are_those_of_the_take_of_their_length():
+    """``sample_frames(take_frames=N)`` renders frame 0 of an N-frame take: the take's motion is drawn over its
+    whole length, so the benchmarks' faint markers (``faint_by_camera``) are those of the take they score."""
+    from carapost.core.blobs.synth import sample_frames
+
+    long = sample_frames(False, seed=5, frames=1, markers=35, cameras=(0,), take_frames=300)[0]
+    short = sample_frames(False, seed=5, frames=1, markers=35, cameras=(0,))[0]
+    scene = build_scene(markers=35, frames=300, seed=5)
+    cams = true_cameras(scene, 0)
+    _, tr = render_view(scene, frame_geometry(scene, 0), cams[0], 0, 0, leds=leds_of(cams))
+    centres = tr.centre[tr.visible]
+    d = np.hypot(*(long.centres[:, None] - centres[None]).transpose(2, 0, 1)).min(1)
+    assert len(long.centres) > 30 and d.max() < 1e-6
+    # A 1-frame take's frame 0 is another pose.
+    d = np.hypot(*(short.centres[:, None] - centres[None]).transpose(2, 0, 1)).min(1)
+    assert d.max() > 0.05

@@ -54,16 +54,18 @@ def initialise_from_seeds(folder, project, doc, frame: int | None = None) -> Non
     process_to_init3d(project, seeds, read_brim_svg(folder / "brim.svg"), log=lambda s: None, stack=doc.stack)
 
 
-def faint_by_camera(markers: int, seed: int, white: bool = False) -> list[set]:
+def faint_by_camera(markers: int, seed: int, white: bool = False, *, frames: int) -> list[set]:
     """Per camera, the labels of the sample take's markers that are faint on frame 0.
 
     Faint: in view, but the paint barely changes the image (black paint on a dense
-    black brow; :data:`carapost.core.blobs.synth.FAINT`).  Renders frame 0 again
-    (with white markers for a ``--white`` take: they are never faint).
+    black brow; :data:`carapost.core.blobs.synth.FAINT`).  Renders frame 0 of the take of
+    ``frames`` frames again (its motion, and so its frame 0, depends on its length; with white
+    markers for a ``--white`` take: they are never faint).
     """
     from carapost.core.blobs.synth import sample_frames
 
-    return [set(f.faint_names or ()) for f in sample_frames(white, seed=seed, frames=1, markers=markers)]
+    return [set(f.faint_names or ()) for f in sample_frames(white, seed=seed, frames=1, markers=markers,
+                                                            take_frames=frames)]
 
 
 def seen(visible: np.ndarray, labels, faint: list[set]) -> np.ndarray:

@@ -433,7 +433,7 @@ def disc_image(rng, size=41, radius=4.0, blur=1.0, amplitude=100.0, background=6
 
 def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int = 40, markers: int = 100,
                   noise: float | None = None, blur: float | None = None, cameras=(0, 1, 2, 3),
-                  jaw_open: int = 0, take_frames: int = 120, perspective_dots: bool = True) -> list[SynthImage]:
+                  jaw_open: int = 0, take_frames: int | None = None, perspective_dots: bool = True) -> list[SynthImage]:
     """Frames of a ``carapost sample`` take (all its cameras), rendered in memory, with their truth.
 
     The same renderer as ``carapost sample`` (:mod:`carapost.sample`): a face with
@@ -458,9 +458,13 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
     cameras : sequence of int
         Which of the four cameras.
     jaw_open : int
-        Instead of ``frames`` and ``step``: this many frames of a ``take_frames``-frame take where
-        the jaw is open widest (its lower-lip and chin dots seen at grazing angles in the
+        Instead of ``frames`` and ``step``: this many frames of a ``take_frames``-frame take (120 by
+        default) where the jaw is open widest (its lower-lip and chin dots seen at grazing angles in the
         jaw's shadow, beside the teeth), each a frame apart from the next.
+    take_frames : int, optional
+        The length of the take the frames belong to (by default just long enough to hold them).  The
+        take's motion is drawn over its whole length, so frame 0 of a 300-frame ``carapost sample`` take
+        is rendered as it is only with ``take_frames=300``.
     perspective_dots : bool
         Dots drawn under perspective, as by ``carapost sample``: ``centres`` are their images' centres, a few
         hundredths of a pixel off their centres' projections (False: ``--linear-dots``, centred on them).
@@ -470,7 +474,10 @@ def sample_frames(white: bool = False, seed: int = 0, frames: int = 2, step: int
     from carapost.sample.scene import build_scene, frame_geometry, true_cameras
 
     kw = {k: float(v) for k, v in (("noise", noise), ("blur", blur)) if v is not None}
-    length = int(take_frames) if jaw_open else max(1, (frames - 1) * step + 1)
+    if jaw_open:
+        length = int(take_frames or 120)
+    else:
+        length = max(1, (frames - 1) * step + 1, int(take_frames or 0))
     sc = build_scene(markers=markers, frames=length, seed=seed, white=white, perspective_dots=perspective_dots, **kw)
     labels = np.array(list(sc.markers.labels) + [f"Brim_{i}" for i in range(sc.n_brim)])
     out = []
