@@ -21,7 +21,7 @@ images) run on the same frames.
   60 markers, 14 confusers), with the recall of each size (``recall_by_semi_axis``, ours and
   the baseline's): what a take with bigger dots or closer cameras would give.  No target of
   the issue is set on them; they are reported so that the weakness they show stays in view
-  (docs/blobs.md, "Session 31").
+  (docs/blobs-history.md, "Session 31").
 - ``blobs_crb_ratio_snr{15,50,150}``: isolated blurred discs (radius 4 px, blur
   1 px) at signal-to-noise 15/50/150: per-axis RMS centre error over the
   Cramér-Rao bound computed for that exact image model (target <= 1.5).

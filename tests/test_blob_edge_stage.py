@@ -1,4 +1,4 @@
-"""The edge stage: the classifier of the ellipses found from a candidate's own edge (docs/blobs.md,
+"""The edge stage: the classifier of the ellipses found from a candidate's own edge (docs/blobs-history.md,
 "Session 28"; first tried without the edge's own features in session 20)."""
 from __future__ import annotations
 

@@ -577,7 +577,7 @@ def test_a_saturated_white_dot_on_a_highlight_is_found_from_its_own_edge(monkeyp
     measurement grows over the highlight (19.5 x 13.5 px, 1.1 px off), holds its candidate and has a clean
     edge, so it was taken for a larger blob the candidate is part of, and stage 2 scores it 0.29: the dot was
     missed.  A grown fit that stage 2 rejects is not taken for such a blob: the candidate's own edge outlines the
-    dot (docs/blobs.md, "Session 27")."""
+    dot (docs/blobs-history.md, "Session 27")."""
     from carapost.core.blobs import detector
 
     error = _white_dot_error(markers=100, frames=81, seed=2, frame=80, camera=1, label="Nose_Tip")

@@ -69,7 +69,7 @@ def _compare(ref, new, centre_tol, extra_tol, only=None):
 def test_measure_equals_the_numpy_mathematics_on_every_blob(frames, passes):
     """Against the same mathematics in numpy float64, on every candidate whose contrast is over 10 noise.
 
-    The kernel's per-pixel sums are float32 (1.7x faster than float64; docs/blobs.md, "Session 30"),
+    The kernel's per-pixel sums are float32 (1.7x faster than float64; docs/blobs-history.md, "Session 30"),
     its solves float64.  On the sample takes' frames every such window agrees: centres to 2e-4 px
     (measured 1.3e-4).  On the cluttered frames a few windows hold two blobs or a blob and a confuser,
     whose systems are ill-conditioned, and a ring pixel at the edge of the plane's ring flips with a

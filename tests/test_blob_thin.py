@@ -92,8 +92,8 @@ def chin_frames():
 # (camera's index in chin_frames, marker): thin dots 6-7 px long and ~1 px across, 10-15 grey levels darker than the
 # shade they lie in, measured 4.4-7.8 px across and 0.9-1.4 px off by step 3 and step 5 until session 35.  Since then
 # three of them are found from their candidate's own edge first (the black fits stage 2 scores under 0.98 and those
-# grown 1.3 times their candidate are looked at again: docs/blobs.md, "Session 35"), as lines 0.07-0.58 px off, and
-# step 6 measures the fourth.
+# grown 1.3 times their candidate are looked at again: docs/blobs-history.md, "Session 35"), as lines 0.07-0.58 px
+# off, and step 6 measures the fourth.
 _THIN = [(0, "Chin_L_4"), (1, "Jaw_L_3"), (2, "Chin_R_4"), (2, "Cheek_L_11")]
 _STEP6 = [(2, "Chin_R_4")]
 

@@ -104,7 +104,7 @@ def test_a_lost_point_does_not_come_back_on_one_blob_and_patches(quiet, monkeypa
     """A lost point's patch templates are from before the loss: they lag a marker that moved meanwhile.
 
     With this rule the white 156-marker rendered take went from 0.109 to 0.106 mm RMS forwards
-    (docs/tracking.md, "Session 20").  Here the dot is gone from
+    (docs/tracking-history.md, "Session 20").  Here the dot is gone from
     every camera for frames 5-7 and drawn in all four on frame 8, where one camera detects it: patches
     find it in the other three, but the point comes back on its blob alone (on its ray), and on the
     patches only where the rule is switched off.
@@ -137,7 +137,7 @@ def test_a_return_on_one_blob_needs_the_next_frame(quiet, monkeypatch, views_nex
 
     On the white 35-marker process take of seed 2 a lower lip lost with the jaw open came back twice
     for one frame on a highlight of its teeth, 3.9 mm off: two swapped samples, and Interpolate Gaps
-    then filled the gap through them (docs/tracking.md, "Session 30").
+    then filled the gap through them (docs/tracking-history.md, "Session 30").
     """
     from carapost.core.tracking import engine
 

@@ -497,7 +497,7 @@ def main(argv=None) -> int:
         Fg, Yg = stage2_examples(grazing, white, model) if grazing else (F2[:0], Y2[:0])
         # The grazing views are taught, but the default threshold is set on the others: they are the hardest
         # positives, and calibrated with them the threshold follows their worst 1 %, not the ordinary dots'
-        # (docs/blobs.md, "Grazing-angle training images": black false detections 55 -> 52, white 24 -> 21).
+        # (docs/blobs-history.md, "Grazing-angle training images": black false detections 55 -> 52, white 24 -> 21).
         model.stage2 = calibrate(train(np.concatenate([F2, Fg]), np.concatenate([Y2, Yg]), a.seed + 1, hidden=12),
                                  F2, Y2)
         F2, Y2 = np.concatenate([F2, Fg]), np.concatenate([Y2, Yg])

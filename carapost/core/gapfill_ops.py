@@ -56,7 +56,7 @@ def weak_samples(point) -> np.ndarray:
     the white 35-marker process take of seed 2, a patch-only sample 1.6 mm off
     before a 23-frame gap and a single-sensor one 1.4 mm off after it put the fill
     4.7 mm off; predicted from the samples beyond them, it is at most 0.58 mm off
-    (docs/tracking.md, "Session 30").  Samples with no 2D samples at all (a C3D's,
+    (docs/tracking-history.md, "Session 30").  Samples with no 2D samples at all (a C3D's,
     or placed by hand) are not weak.
     """
     firm = np.isin(point.src, (SRC_DETECTION, SRC_TARGET, SRC_KEYFRAME)).sum(axis=1)

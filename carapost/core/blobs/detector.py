@@ -111,7 +111,7 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
         thin = np.zeros(len(ys), bool)
         if not white and level == levels[0]:
             # Black dots under 1 level px across beside a dark outline (edge-on at the face's silhouette):
-            # the narrower DoG's maxima that are not the ordinary ones' (docs/blobs.md, "Thin dots beside
+            # the narrower DoG's maxima that are not the ordinary ones' (docs/blobs-history.md, "Thin dots beside
             # dark outlines").  White dots are not looked for so: the face's outline is dark, unlike them,
             # and on the white frames of seeds 0-2 the pass found 1 more dot and 47 more false detections.
             ty, tx, tdog, tox, toy = fe.thin_candidates(padded, g, max(floor, fe.THIN_FLOOR * lnoise), work, level)
@@ -130,7 +130,7 @@ def find_candidates(img: np.ndarray, white: bool, min_major: float, max_major: f
         # Not where cv2.pyrDown centres level pixel u (that is u * 2^L): these candidates sit (2^L - 1)/2 px
         # right of and below their blob.  The fit re-centres them; the classifier and the rescue's limits
         # were trained and tuned with them there, and placing them exactly (the classifier retrained)
-        # made tracking worse (docs/blobs.md, "Candidates on the pyramid's grid").
+        # made tracking worse (docs/blobs-history.md, "Candidates on the pyramid's grid").
         xs_all.append((xs + ox - b + 0.5) * scale - 0.5)
         ys_all.append((ys + oy - b + 0.5) * scale - 0.5)
         lv_all.append(np.full(len(xs), level, np.int8))
@@ -233,7 +233,7 @@ def fit_candidates(bright: np.ndarray, x: np.ndarray, y: np.ndarray, r0: np.ndar
 #: octave finer than theirs, then one at full resolution about that answer (:func:`_fit_coarse`).  With the finer
 #: candidates (:func:`fit_candidates`), a large dot's coarse candidate (a level pixel is 8-16 px) started pixels off
 #: with a radius too small, crept towards the dot a few pixels a round and stopped short of it, or was merged into
-#: a fit of a fragment of its rim or inside (docs/blobs.md, "Session 32").
+#: a fit of a fragment of its rim or inside (docs/blobs-history.md, "Session 32").
 LEVEL_FIRST = 3
 #: Radial-symmetry solves of the full-resolution round after the level's.
 LEVEL_FIRST_PASSES = 2
@@ -290,7 +290,7 @@ def _one_per_blob(cand: Candidates, sel: np.ndarray, prob1: np.ndarray) -> tuple
     levels from :data:`LEVEL_FIRST` on, radius from :data:`COARSE_RADIUS` of the level's sizes).
 
     A large dot's coarse candidate lies inside it, and so do finer ones, off its centre, on fragments of its rim
-    or of its inside: the coarse one is measured as well (docs/blobs.md, "Session 32").
+    or of its inside: the coarse one is measured as well (docs/blobs-history.md, "Session 32").
     """
     lv = cand.level[sel]
     coarse = (lv >= LEVEL_FIRST) & (cand.radius[sel] >= COARSE_RADIUS * 2.0 ** lv)
@@ -382,7 +382,7 @@ RESCUE_LOGIT = 2.4
 #: ``RESCUE_ABOVE``, black ``RESCUE_ABOVE_FLAT`` (0.9 for both until session 35: at 0.98 the black held-out frames'
 #: centre RMS went 0.0952 -> 0.0907 px and the black 156-marker tracking runs' 0.0709 / 0.0701 -> 0.0667 / 0.0666 mm,
 #: for no measurable CPU; white's benchmark frames gained a little, but its tracking runs lost, the 100-marker take's
-#: forwards 0.0984 -> 0.1019 mm; docs/blobs.md, "Session 35").
+#: forwards 0.0984 -> 0.1019 mm; docs/blobs-history.md, "Session 35").
 RESCUE_ABOVE, RESCUE_ABOVE_FLAT = 0.9, 0.98
 #: A grown fit that holds its candidate and has a clean edge of its own is a larger blob the candidate is part
 #: of, unless stage 2 scores it under this (the guide's default threshold): then it is the dot measured with a
@@ -393,7 +393,7 @@ HELD_BELOW = 0.4
 #: A fit whose semi-major axis is this many times its candidate's radius was drawn off its dot (it took in what
 #: the dot touches) when its own edge says so (1.5 until session 35: at 1.3 mouth-corner dots that took in a little
 #: of the lips beside them are found from their own edge; recall on the four sets of benchmark frames +1 to +3
-#: markers, the held-out black frames' centre RMS 0.0907 -> 0.0887 px; docs/blobs.md, "Session 35").
+#: markers, the held-out black frames' centre RMS 0.0907 -> 0.0887 px; docs/blobs-history.md, "Session 35").
 GROWN = 1.3
 
 
@@ -462,7 +462,7 @@ def _rescue_drifted(bright, cand: Candidates, sel, moved, x, y, major, minor, an
 #: its minor semi-axis, is the other's dot measured together with what it touches.  The white nose tip's blob
 #: with the nose's highlight holds the dot at 0.67 of its minor semi-axis; a large dot's rim holds fragments of
 #: itself found from level-1 candidates at 0.9-1.1 (6 white and 4 black large dots of the benchmark were dropped
-#: for one at 1.0; docs/blobs.md, "Session 32").
+#: for one at 1.0; docs/blobs-history.md, "Session 32").
 ENGULF, ENGULF_INSIDE = 2.0, 0.8
 
 
@@ -559,7 +559,7 @@ TEXTURED = 1.5
 #: patch of skin, whose shading pulls the intensity centre though the ring about it fits its plane.  On the
 #: large-dot frames the centre RMS fell 0.1080 -> 0.1013 px (black) and 0.1057 -> 0.0983 (white); isolated discs of
 #: radius 4-12 px, whose lines meet within 0.087 of the radius at signal-to-noise 15, keep the full trust, and their
-#: centres do not change (docs/blobs.md, "Session 36").
+#: centres do not change (docs/blobs-history.md, "Session 36").
 LARGE, LINES_APART = 12.0, 0.1
 
 
@@ -587,9 +587,10 @@ def _trust(feats: np.ndarray) -> np.ndarray:
 
 #: An ellipse found from its candidate's edge moves to step 5's centre (measured along its own normals) when
 #: that is at most EDGE_MOVE px away and step 5 run again from there moves it less than EDGE_CONVERGE times as
-#: far (docs/blobs.md, "Session 19: step 5 on the ellipses found from a candidate's edge").  EDGE_MOVE was 1.0 until
-#: session 35: the white saturated nose-tip dot's ellipse sits 1.0-1.3 px off on the nose's highlight (the white
-#: benchmark's centre RMS 0.1191 -> 0.1163 px; the white 100-marker tracking take's 0.0983 / 0.0993 -> 0.0968 / 0.0972 mm).
+#: far (docs/blobs-history.md, "Session 19: step 5 on the ellipses found from a candidate's edge").  EDGE_MOVE was
+#: 1.0 until session 35: the white saturated nose-tip dot's ellipse sits 1.0-1.3 px off on the nose's highlight (the
+#: white benchmark's centre RMS 0.1191 -> 0.1163 px; the white 100-marker tracking take's 0.0983 / 0.0993 -> 0.0968 /
+#: 0.0972 mm).
 EDGE_MOVE, EDGE_CONVERGE = 1.3, 0.5
 
 
@@ -786,12 +787,12 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
     rec["color"] = COLOR_WHITE if white else COLOR_BLACK
     if not white:
         # White paint is shaded, not flat: on the white benchmark frames this took 7 detections and moved the
-        # centre RMS from 0.1385 to 0.1387 px (docs/blobs.md, "Session 33").
+        # centre RMS from 0.1385 to 0.1387 px (docs/blobs-history.md, "Session 33").
         rec = rec[_thin_lines(bright, rec, fitted.feats[keep, _FILL], min_major, max_major)]
     _along_profiles(bright, rec)
     if not white and len(rec):
         # White paint takes the light as skin does but its bright core clips and shines: its centres show no such
-        # pull (docs/blobs.md, "Session 37").
+        # pull (docs/blobs-history.md, "Session 37").
         _light_corrected(img, rec)
     # Step 5 may bring two fits of one dot to its centre (an elongated dot's two ends, each measured as a round
     # blob, both refined from the dot's whole edge): one detection.

@@ -17,7 +17,7 @@ lanes to float64's 8, fit_round 1.7x faster); the solves on those sums and
 everything a blob's answer is made of are float64.  On the sample takes' blobs
 the centres are the float64 numpy arithmetic's to 2e-4 px, and the benchmark's
 detections score the same to four decimals (``tests/test_blob_measure_kernel.py``;
-docs/blobs.md, "Session 30").  Constants in those loops are float32 (``_0``,
+docs/blobs-history.md, "Session 30").  Constants in those loops are float32 (``_0``,
 ``_1``, ...): one float64 literal would widen the whole loop.
 Windows are flat arrays with their pixels' coordinates beside them: one long
 loop per step vectorises, where loops over each row's few pixels inside a

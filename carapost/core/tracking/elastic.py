@@ -321,7 +321,7 @@ def turned_offsets(X, available, nb, off, rows) -> np.ndarray:
     are left as they are.
     """
     # Every usable neighbour has the same say in the rotation: where one outweighs the rest (it moved with
-    # the point), the weighted fit rests on one point and its rotation is a guess (docs/tracking.md,
+    # the point), the weighted fit rests on one point and its rotation is a guess (docs/tracking-history.md,
     # "Session 28": a cheek dot's neighbourhood turned 11-14 degrees in four frames).
     fit, enough = _neighbourhood_motion(X, available, nb, off, None, rows)
     enough &= np.isfinite(fit[:, 0, 0])

@@ -51,7 +51,7 @@ LAST_SEEN_FRAMES = 4
 NARROW_MM_PER_PX = 1.2
 #: A point seen by one blob and one patch view is put at its neighbours' predicted depth only where the two
 #: views fix its depth this poorly (mm per px, :meth:`FrameTracker._patch_depth`): a patch across the rig
-#: gives a depth as good as the prediction (docs/tracking.md, "Session 19").
+#: gives a depth as good as the prediction (docs/tracking-history.md, "Session 19").
 PATCH_DEPTH_MM_PER_PX = NARROW_MM_PER_PX
 #: Such a point's depth may lie this far (mm) from its firmly seen neighbours' prediction: farther,
 #: and it is brought back to this distance (grazing or half-hidden dots are detected 1-3 px off).
@@ -162,18 +162,19 @@ def elongation(rec: np.ndarray) -> np.ndarray:
 
 
 #: A return from a loss on two views stands only if the next frame still sees it on a blob in both of its
-#: cameras (docs/tracking.md, "Session 21").
+#: cameras (docs/tracking-history.md, "Session 21").
 RETURN_FOLLOWED = True
 
 
 #: A return from a loss on one blob (a single-sensor sample of a point lost on the frame before) stands only if
 #: the next frame measures the point too: on the white 35-marker process take of seed 2 a lower lip lost with the
-#: jaw open came back for one frame, twice, on a highlight of the teeth 3.9 mm off (docs/tracking.md, "Session 30").
+#: jaw open came back for one frame, twice, on a highlight of the teeth 3.9 mm off (docs/tracking-history.md,
+#: "Session 30").
 SINGLE_RETURN_FOLLOWED = True
 
 
 #: A lost point comes back on two or more blob views: the patches of a point that has one are left out
-#: (their templates are from before the loss; docs/tracking.md, "Session 20").
+#: (their templates are from before the loss; docs/tracking-history.md, "Session 20").
 RETURN_ON_BLOBS = True
 
 
@@ -306,10 +307,11 @@ FUSE_GATE = 3.0
 #: The neighbours' prediction of a point averaged on the frame before is as certain as that average was, plus
 #: this fraction of ``PRED_MM_PER_MM`` x spacing for a frame's change (never less certain than that product
 #: alone, nor more than the neighbours' spread allows): the average becomes a filter over frames
-#: (docs/tracking.md, "Session 22: the prediction's certainty carried from frame to frame").  0: off.
+#: (docs/tracking-history.md, "Session 22: the prediction's certainty carried from frame to frame").  0: off.
 CARRIED_Q = 0.6
 #: The neighbours' votes that a frame's measured points are averaged with are turned by their neighbourhood's
-#: rotation since their offsets were refreshed (:func:`.elastic.turned_offsets`; docs/tracking.md, "Session 25").
+#: rotation since their offsets were refreshed (:func:`.elastic.turned_offsets`; docs/tracking-history.md,
+#: "Session 25").
 TURNED_VOTES = True
 
 

@@ -11,7 +11,7 @@ image's own pixels), at any score.  What it finds is kept only where it makes th
 point whole: two or more cameras' dots (found or detected) that meet in 3-D near
 the prediction, each within a fraction of a pixel of their point's projection.
 The dots kept are added to the frame's detections and tracked as any blob
-(docs/tracking.md, "Session 41").
+(docs/tracking-history.md, "Session 41").
 
 Pure functions over images, cameras and arrays; :meth:`.engine.FrameTracker.step`
 calls :func:`look_again`.
@@ -41,7 +41,7 @@ MEET_MM = 1.5
 #: the rendered takes a pair's point was about as far from the marker as from the prediction (median 0.22 mm
 #: within 0.25 mm of it, 0.46 at 0.5-0.75, 1.0 at 1-1.5; three or more views 0.15, 0.38, 0.49).  At 1.5 mm a
 #: chin dot lost for two frames came back on a found dot 6.8 px off and another dot's blob, 2.5 mm off its
-#: marker (docs/tracking.md, "Session 41").
+#: marker (docs/tracking-history.md, "Session 41").
 PAIR_MEET_MM = 0.75
 #: Each within this (px) of the projection of the point they make.
 VIEW_PX = 0.35
@@ -129,8 +129,8 @@ def find_in_crops(images: list[np.ndarray], uv: np.ndarray, src: np.ndarray, whi
         image = images[i]
         bright = image if white else cv2.bitwise_not(image)
         # The enlarged crop's centres are 0.6-0.8 px off on lower-lip dots, their edge at the image's own
-        # pixels 0.3 px (docs/tracking.md, "Session 38"); and the detector's step 9 there takes a fifth more
-        # off (docs/tracking.md, "Session 41").
+        # pixels 0.3 px (docs/tracking-history.md, "Session 38"); and the detector's step 9 there takes a fifth more
+        # off (docs/tracking-history.md, "Session 41").
         o = out[at]
         o["x"], o["y"], _ = refine_centres(bright, x[at], y[at], o["major"], o["minor"], o["angle"], flat=not white,
                                            trust=np.zeros(len(o)))
