@@ -260,7 +260,8 @@ def test_the_kernel_computes_what_the_numpy_reference_does(flat):
     diffs, textured, kinds, along, moved = [], [], [], [], []
     for s in sample_frames(False, seed=1, frames=1, markers=35):
         cand, bright = find_candidates(s.image, False, 4.0, 50.0)
-        fitted = fit_stage(cand, bright, default_model(False))
+        # The fits as the comments below counted them (the orphan search of session 44 adds thin edge ellipses).
+        fitted = fit_stage(cand, bright, default_model(False), orphans=False)
         model = default_model(False)
         keep = np.flatnonzero(fitted.ok & (model.stage2.predict(fitted.feats) >= 0.4))
         args = (fitted.x[keep], fitted.y[keep], fitted.major[keep], fitted.minor[keep], fitted.angle[keep],
@@ -402,7 +403,9 @@ def test_a_nose_tip_dot_on_the_shadow_under_the_nose_is_found_from_its_own_edge(
 
     assert error(0, 0.15) < 0.5
     assert max(error(c) for c in (1, 3)) < 0.3
-    monkeypatch.setattr(detector, "edge_ellipses", lambda bright, x, *a, **k: np.zeros((len(x), 6)))
+    # No edge search at all: neither the rescue's nor the orphan search's (its rows have the quality columns).
+    monkeypatch.setattr(detector, "edge_ellipses",
+                        lambda bright, x, *a, **kw: np.zeros((len(x), 10 if kw.get("quality") else 6)))
     assert error(0, 0.15) > 1.5
 
 

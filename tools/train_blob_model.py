@@ -29,14 +29,25 @@ its ellipse.  The network (tanh layers,
 Adam on the squared error, each example seen in its four mirror images (the grid flipped along either axis,
 the target's sign with it).
 
+With ``--orphan-scenes N`` the **orphan gate** is trained too (``--orphan-only``: it alone, over the stages in
+``--out``): the threshold components about the candidates no believed fit explains
+(``carapost.core.blobs.detector._with_orphans``) of N sample-take scenes more (seeds 4000 and up; a third as many
+jaw-open ones, seeds 4500 and up), each labelled by whether step 5's search from it ends as a fit the detector
+keeps at the default threshold; its bias lets every such training component through.
+
 Usage::
 
     python tools/train_blob_model.py [--images 160] [--scenes 3] [--jaw-scenes 0] [--grazing 0] [--edge-scenes 0]
-                                     [--edge-fpr 0.5] [--edge-only] [--colour both] [--seed 5] [--out resources]
+                                     [--edge-fpr 0.5] [--edge-only] [--orphan-scenes 0] [--orphan-only]
+                                     [--colour both] [--seed 5] [--out resources]
 
 The shipped edge stages (session 28) were made, over the shipped stages 1 and 2, with::
 
     python tools/train_blob_model.py --images 200 --edge-scenes 30 --edge-fpr 0.5 --edge-only --seed 5
+
+the shipped orphan gates (session 44), over the shipped stages 1, 2 and edge, with::
+
+    python tools/train_blob_model.py --orphan-scenes 40 --orphan-only --seed 5
 
 and the shipped centre stages, over the shipped stages 1, 2 and edge, white's (two layers, session 40) and
 black's (one layer of 64 units, session 39), with::
@@ -50,6 +61,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -57,10 +69,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from carapost.core.blobs.centre_net import GRID, CentreNet, centre_inputs  # noqa: E402
+from carapost.core.blobs import detector as blob_detector  # noqa: E402
 from carapost.core.blobs.detector import (RESCUE_LOGIT, _refine_edge_ellipses, as_grey_u8, detect,  # noqa: E402
-                                         find_candidates, fit_stage)
+                                         find_candidates, fit_stage, orphan_components, orphan_features,
+                                         orphan_fits)
 from carapost.core.blobs.features import noise_sigma  # noqa: E402
-from carapost.core.blobs.model import MLP, BlobModel  # noqa: E402
+from carapost.core.blobs.model import MLP, ORPHAN_FEATURE_NAMES, BlobModel  # noqa: E402
 from carapost.core.blobs.synth import render, render_grazing, sample_frames  # noqa: E402
 
 
@@ -175,7 +189,9 @@ def stage2_examples(data, white: bool, model: BlobModel):
         c, bright = find_candidates(as_grey_u8(s.image), white, 2.0, 60.0)
         if len(c.x) == 0:
             continue
-        fit = fit_stage(c, bright, model)
+        # Without the orphan search (session 44): the shipped stages were trained before it, and its fits are the
+        # edge stage's to score.
+        fit = fit_stage(c, bright, model, orphans=False)
         pts = np.stack([fit.x, fit.y], 1)
         pos, use = _labels(pts, s, np.full(len(pts), 1.0))
         use &= fit.ok
@@ -197,7 +213,7 @@ def edge_examples(data, white: bool, model: BlobModel):
         c, bright = find_candidates(as_grey_u8(s.image), white, 2.0, 60.0)
         if len(c.x) == 0:
             continue
-        fit = fit_stage(c, bright, model)
+        fit = fit_stage(c, bright, model, orphans=False)     # as the shipped edge stage was trained (session 28)
         if fit.from_edge is None:
             continue
         sel = np.flatnonzero(fit.from_edge & fit.ok)
@@ -237,6 +253,17 @@ def large_images(white: bool, n_images: int, seed: int):
             for _ in range(n_images)]
 
 
+@contextmanager
+def _without_orphans():
+    """Detection without the orphan search (:data:`carapost.core.blobs.detector.ORPHANS`) within the block."""
+    before = blob_detector.ORPHANS
+    blob_detector.ORPHANS = False
+    try:
+        yield
+    finally:
+        blob_detector.ORPHANS = before
+
+
 def centre_examples(data, white: bool, model: BlobModel, tol: float = 1.5):
     """The centre stage's examples: inputs (:func:`~carapost.core.blobs.centre_net.centre_inputs`) of every
     detection (steps 1-8) within ``tol`` px of a visible marker, and its centre's error (detected less true, px)
@@ -246,7 +273,8 @@ def centre_examples(data, white: bool, model: BlobModel, tol: float = 1.5):
     X, Y = [], []
     for s in data:
         img = as_grey_u8(s.image)
-        rec = detect(img, white=white, model=model, learned_centres=False)
+        with _without_orphans():      # as the shipped centre stages were trained (sessions 39-40)
+            rec = detect(img, white=white, model=model, learned_centres=False)
         if len(rec) == 0 or len(s.centres) == 0:
             continue
         d, j = cKDTree(np.column_stack([rec["x"], rec["y"]]).astype(np.float64)).query(s.centres)
@@ -433,6 +461,53 @@ def _edge_stage(model: BlobModel, white: bool, a) -> MLP:
     return edge
 
 
+def orphan_takes(white: bool, scenes: int, seed: int):
+    """Frames of ``carapost sample`` takes for the orphan gate: seeds 4000 + 10 seed + k (never the benchmark's),
+    3 frames x 4 cameras a scene, and a third as many jaw-open scenes (2 frames x 4 cameras)."""
+    rng = np.random.default_rng([seed, int(white), 17])
+    out = _scenes(white, 4000 + 10 * seed, scenes, rng, (60, 160), frames=3, step=37)
+    return out + _scenes(white, 4500 + 10 * seed, max(1, scenes // 3), rng, (35, 160), jaw_open=2)
+
+
+def orphan_examples(data, white: bool, model: BlobModel):
+    """The orphan gate's inputs of every threshold component the detector finds about the candidates no believed
+    fit explains, and whether step 5's search from it ends as a fit that the detector keeps at the default
+    threshold (clean, thin, ``ok``, scored 0.4 or more: what the gate must let through)."""
+    X, Y = [], []
+    for s in data:
+        c, bright = find_candidates(as_grey_u8(s.image), white, 4.0, 50.0)
+        if len(c.x) == 0:
+            continue
+        logit1 = model.stage1.logit(c.feats)
+        prob1 = 1.0 / (1.0 + np.exp(-np.clip(logit1, -30, 30)))
+        fitted = fit_stage(c, bright, model, orphans=False)
+        fin, comp = orphan_components(fitted, c, bright, model, prob1)
+        if len(fin) == 0:
+            continue
+        good, e, ok, F, Q = orphan_fits(c, bright, fin, comp, logit1)
+        kept = np.zeros(len(fin), bool)
+        kept[good] = ok & (model.score(F, np.ones(len(F), bool), RESCUE_LOGIT, Q) >= 0.4)
+        X.append(orphan_features(c, fin, comp, logit1))
+        Y.append(kept)
+    if not X:
+        return np.zeros((0, len(ORPHAN_FEATURE_NAMES)), np.float32), np.zeros(0, np.float32)
+    return np.concatenate(X), np.concatenate(Y).astype(np.float32)
+
+
+def _orphan_gate(model: BlobModel, white: bool, a) -> MLP:
+    """Train the orphan gate for ``model`` (``--orphan-scenes``) and report it.
+
+    Its output bias is set so that it lets through every training component whose search ended as a kept fit
+    (the lowest such logit is 0): it only saves the searches, it should not change what is found.
+    """
+    X, Y = orphan_examples(orphan_takes(white, a.orphan_scenes, a.seed), white, model)
+    gate = train(X, Y, a.seed + 3, hidden=8)
+    gate.b2 = float(gate.b2 - gate.logit(X[Y > 0.5]).min()) if (Y > 0.5).any() else gate.b2
+    print(f"orphan gate: {len(Y)} components ({int(Y.sum())} kept fits); it lets through "
+          f"{(gate.logit(X) >= 0).mean():.3f} of them")
+    return gate
+
+
 def _layers(text: str) -> tuple:
     """``--centre-hidden``: one or two positive unit counts, comma-separated (step 9 runs one or two layers)."""
     try:
@@ -460,6 +535,11 @@ def main(argv=None) -> int:
                          "rule it stands beside (stage 2 less RESCUE_LOGIT)")
     ap.add_argument("--edge-only", action="store_true",
                     help="keep the stages 1 and 2 in --out and (re)train only the edge stage")
+    ap.add_argument("--orphan-scenes", type=int, default=0,
+                    help="train the orphan gate too, on the threshold components of this many sample-take scenes "
+                         "(and a third as many jaw-open ones) per colour (0: no gate; every component is searched)")
+    ap.add_argument("--orphan-only", action="store_true",
+                    help="keep the other stages in --out and (re)train only the orphan gate")
     ap.add_argument("--centre-scenes", type=int, default=0,
                     help="train the centre stage too, on the detections of the generated images and of this many "
                          "sample-take scenes more per colour (0: no centre stage)")
@@ -481,6 +561,12 @@ def main(argv=None) -> int:
             model.edge = _edge_stage(model, white, a)
             model.save(path)
             print(f"{name}: edge stage only; {time.time() - t:.0f} s -> {path}")
+            continue
+        if a.orphan_only:
+            model = BlobModel.load(path)
+            model.orphan = _orphan_gate(model, white, a)
+            model.save(path)
+            print(f"{name}: orphan gate only; {time.time() - t:.0f} s -> {path}")
             continue
         if a.centre_only:
             model = BlobModel.load(path)
@@ -504,6 +590,8 @@ def main(argv=None) -> int:
         p1, p2 = model.stage1.predict(F1), model.stage2.predict(F2)
         if a.edge_scenes:
             model.edge = _edge_stage(model, white, a)
+        if a.orphan_scenes:
+            model.orphan = _orphan_gate(model, white, a)
         if a.centre_scenes:
             model.centre = _centre_stage(model, white, a)
         model.save(path)

@@ -32,12 +32,14 @@ from . import features as fe
 from .candidate_kernel import LEVEL_SCALE, apart, engulfing, greedy_nms, profile_radius
 from .centre import BORDER, MEASURE_NAMES, PASSES, WINDOWS, _constants
 from .centre_net import corrected_centres
+from .component_kernel import COMPONENT_COLUMNS, threshold_components, unexplained
 from .measure_kernel import fit_features, fit_round, next_round
 from .edges import TRUST, TRUST_TEXTURED, edge_ellipses, refine_centres
 from .gauss_kernel import fit_gaussians
 from .light_kernel import pull_back
 from .profile_kernel import fit_profiles
-from .model import EDGE_FEATURE_NAMES, FIT_FEATURE_NAMES, STAGE1_GATE, BlobModel, default_model
+from .model import (EDGE_FEATURE_NAMES, FIT_FEATURE_NAMES, ORPHAN_FEATURE_NAMES, STAGE1_GATE, BlobModel,
+                    default_model)
 
 
 @dataclass
@@ -519,8 +521,9 @@ def _fit_features(cand: Candidates, sel, logit1, x, y, major, minor, extra, resc
     return F
 
 
-def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
-    """Stage-1 gate, suppression of duplicates, fitting, and the stage-2 features."""
+def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel, orphans: bool | None = None) -> Fitted:
+    """Stage-1 gate, suppression of duplicates, fitting, and the stage-2 features; then the dots found about
+    the candidates no believed fit explains (:func:`_with_orphans`; ``orphans``: :data:`ORPHANS` by default)."""
     logit1 = model.stage1.logit(cand.feats)
     prob1 = 1.0 / (1.0 + np.exp(-np.clip(logit1, -30, 30)))
     sel = np.flatnonzero(prob1 >= STAGE1_GATE)
@@ -545,8 +548,136 @@ def fit_stage(cand: Candidates, bright: np.ndarray, model: BlobModel) -> Fitted:
     h, w = bright.shape
     ok &= (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
     F = _fit_features(cand, sel, logit1, x, y, major, minor, extra, rescued)
-    return Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F,
-                  (cand.x[sel], cand.y[sel], cand.radius[sel]), rescued, quality)
+    fitted = Fitted(x, y, major, minor, ang, ok, prob1[sel].astype(np.float32), F,
+                    (cand.x[sel], cand.y[sel], cand.radius[sel]), rescued, quality)
+    if (ORPHANS if orphans is None else orphans) and model.stage2 is not None:
+        fitted = _with_orphans(fitted, cand, bright, model, logit1, prob1)
+    return fitted
+
+
+#: Look for dots about the candidates no believed fit explains (:func:`_with_orphans`).
+ORPHANS = True
+#: ... among the finest octave's candidates of stage-1 probability this or more (under STAGE1_GATE: the dots
+#: this finds are mostly ones stage 1 doubts, 0.02-0.3);
+ORPHAN_GATE = 0.01
+#: ... with no fit stage 2 scores this or more (the default threshold) within max(ORPHAN_NEAR px, their radius),
+#: or holding them;
+ORPHAN_BELIEVED, ORPHAN_NEAR = 0.4, 1.5
+#: ... whose threshold component (:mod:`.component_kernel`: window half-size, threshold step in grey levels, area
+#: growth that means it merged) has ORPHAN_MIN_AREA px or more and a semi-major axis of ORPHAN_MAX_A px or less;
+ORPHAN_REACH, ORPHAN_STEP, ORPHAN_JUMP = 12, 2, 2.0
+ORPHAN_MIN_AREA, ORPHAN_MAX_AREA, ORPHAN_MAX_A = 3, 120, 12.0
+#: ... and whose edge, searched from that component's ellipse, is a clean ellipse no wider (full minor axis) than
+#: ORPHAN_MAX_MINOR px and no longer than ORPHAN_MAX_MAJOR px: the dots drawn off are thin ones
+#: (docs/blobs-history.md, "Session 44").
+ORPHAN_MAX_MINOR, ORPHAN_MAX_MAJOR = 3.5, 14.0
+
+
+def orphan_components(fitted: Fitted, cand: Candidates, bright: np.ndarray, model: BlobModel, prob1):
+    """The finest octave's candidates that no believed fit explains, and their threshold components.
+
+    Returns the candidates' indices and their rows of
+    :func:`.component_kernel.threshold_components` (:data:`.component_kernel.COMPONENT_COLUMNS`), one
+    a region (several candidates of one dot find the same), only regions of plausible size.
+    """
+    fin = np.flatnonzero((cand.level == cand.level.min()) & (prob1 >= ORPHAN_GATE)) if len(cand.x) else []
+    if len(fin) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, len(COMPONENT_COLUMNS)))
+    believed = np.flatnonzero(fitted.ok)
+    believed = believed[model.score(fitted.feats[believed], fitted.from_edge[believed], RESCUE_LOGIT,
+                                    fitted.edge_feats[believed]) >= ORPHAN_BELIEVED]
+    free = np.zeros(len(fin), bool)
+    unexplained(_f64(cand.x[fin]), _f64(cand.y[fin]), _f64(cand.radius[fin]), _f64(fitted.x[believed]),
+                _f64(fitted.y[believed]), _f64(0.5 * fitted.major[believed]), _f64(0.5 * fitted.minor[believed]),
+                _f64(fitted.angle[believed]), float(ORPHAN_NEAR), free)
+    fin = fin[free]
+    comp = np.zeros((len(fin), len(COMPONENT_COLUMNS)))
+    threshold_components(bright, _f64(cand.x[fin]), _f64(cand.y[fin]), ORPHAN_REACH, ORPHAN_STEP, ORPHAN_JUMP,
+                         ORPHAN_MAX_AREA, comp)
+    use = (comp[:, 7] > 0) & (comp[:, 2] >= ORPHAN_MIN_AREA) & (comp[:, 3] <= ORPHAN_MAX_A)
+    fin, comp = fin[use], comp[use]
+    # Several candidates of one dot find the same region (the same centroid to the bit).
+    _, first = np.unique(comp[:, 0] * 4096.0 + comp[:, 1], return_index=True)
+    first.sort()
+    return fin[first], comp[first]
+
+
+def orphan_features(cand: Candidates, fin, comp, logit1) -> np.ndarray:
+    """The orphan gate's inputs (:data:`~.model.ORPHAN_FEATURE_NAMES`) of components ``comp`` of candidates ``fin``."""
+    n = len(fin)
+    X = np.empty((n, len(ORPHAN_FEATURE_NAMES)), np.float32)
+    if n:
+        X[:, 0] = np.log(comp[:, 2])
+        X[:, 1], X[:, 2] = comp[:, 3], comp[:, 4]
+        X[:, 3] = comp[:, 4] / comp[:, 3]
+        X[:, 4] = comp[:, 6]
+        X[:, 5] = (comp[:, 8] - comp[:, 9]) / cand.noise
+        X[:, 6] = comp[:, 8] / 255.0
+        X[:, 7] = np.log(max(float(cand.noise), 1e-3))
+        X[:, 8] = logit1[fin]
+        X[:, 9] = cand.radius[fin]
+        X[:, 10] = cand.thin[fin] if cand.thin is not None else 0.0
+        X[:, 11:] = cand.feats[fin]
+    return X
+
+
+def orphan_fits(cand: Candidates, bright: np.ndarray, fin, comp, logit1):
+    """Step 5's edge about each component's ellipse, and the fits of those that are clean and thin.
+
+    Returns which rows gave a fit, and for those the edge ellipses (:func:`.edges.edge_ellipses`' columns),
+    ``ok``, the stage-2 features and the edge stage's features.
+    """
+    e = edge_ellipses(bright, comp[:, 0], comp[:, 1], comp[:, 3], flat=not cand.white, quality=True,
+                      start=(comp[:, 4], np.radians(comp[:, 5])))
+    good = (e[:, 5] > 0) & (e[:, 3] <= ORPHAN_MAX_MINOR) & (e[:, 2] <= ORPHAN_MAX_MAJOR)
+    fin, e = fin[good], e[good]
+    m = len(fin)
+    rr = np.clip(GROW * 0.5 * e[:, 2], 1.0, WINDOWS[-1] - BORDER)
+    ok, extra = np.zeros(m, bool), np.zeros((m, len(MEASURE_NAMES)))
+    if m:
+        _measure_round(np.ascontiguousarray(bright), _f64(e[:, 0]), _f64(e[:, 1]), rr, np.arange(m), cand.noise, 1,
+                       np.zeros((5, m)), ok, extra)
+    h, w = bright.shape
+    ok &= (e[:, 3] > 0.5) & (e[:, 0] >= -0.5) & (e[:, 0] <= w - 0.5) & (e[:, 1] >= -0.5) & (e[:, 1] <= h - 0.5)
+    F = _fit_features(cand, fin, logit1, e[:, 0], e[:, 1], e[:, 2], e[:, 3], extra, np.ones(m))
+    return good, e, ok, F, _edge_quality(e[:, 6:10], extra, cand.noise)
+
+
+def _with_orphans(fitted: Fitted, cand: Candidates, bright: np.ndarray, model: BlobModel, logit1, prob1) -> Fitted:
+    """``fitted`` and the dots found about the candidates no believed fit explains.
+
+    A small dot touching a larger dark region can lose its candidates to stage 1's gate
+    (its neighbourhood looks like that region's rim), to a neighbour's in the suppression, or
+    to a fit drawn into the region that the from-edge search (:func:`_rescue_drifted`) does not
+    set right from the candidate's circle.  About each finest-octave candidate that no fit
+    stage 2 believes explains, the region thresholded from the candidate's peak down to just
+    before it merges with what it touches (:func:`.component_kernel.threshold_components`) is
+    the dot; the orphan gate (:attr:`~.model.BlobModel.orphan`) picks the regions worth a look
+    (of ~130 an image, ~1 ends as a detection), and where step 5's rays from a region's ellipse find a
+    clean, thin edge, the edge's ellipse is one more fit, found from its edge as the rescued ones are
+    (scored by the edge stage, :meth:`~.model.BlobModel.score`).  The suppression of duplicates in
+    :func:`detect` keeps one detection a dot.
+    """
+    fin, comp = orphan_components(fitted, cand, bright, model, prob1)
+    if model.orphan is not None and len(fin):
+        look = model.orphan.logit(orphan_features(cand, fin, comp, logit1)) >= 0.0
+        fin, comp = fin[look], comp[look]
+    if len(fin) == 0:
+        return fitted
+    good, e, ok, F, Q = orphan_fits(cand, bright, fin, comp, logit1)
+    fin = fin[good]
+    if len(fin) == 0:
+        return fitted
+    add = lambda a, b: np.concatenate([a, np.asarray(b, a.dtype)])  # noqa: E731
+    return Fitted(add(fitted.x, e[:, 0]), add(fitted.y, e[:, 1]), add(fitted.major, e[:, 2]),
+                  add(fitted.minor, e[:, 3]), add(fitted.angle, e[:, 4]), add(fitted.ok, ok),
+                  add(fitted.prob1, prob1[fin]), add(fitted.feats, F),
+                  tuple(add(a, b) for a, b in zip(fitted.start, (cand.x[fin], cand.y[fin], cand.radius[fin]))),
+                  add(fitted.from_edge, np.ones(len(fin), bool)), add(fitted.edge_feats, Q))
+
+
+def _f64(v) -> np.ndarray:
+    return np.ascontiguousarray(v, np.float64)
 
 
 #: A blob whose surround (step 3's ring of background) varies more than this many times the image's noise

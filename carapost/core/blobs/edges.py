@@ -105,6 +105,10 @@ COARSE = 4
 _NCOARSE = (_SAMPLES - 1) // COARSE + 1
 #: A ray's edge is its innermost local peak at least this share of the ray's highest.
 INNER = 0.6
+#: The least minor semi-axis of a start ellipse (:func:`edge_ellipses`' ``start``), px.  A thin dot's threshold
+#: component measures 1.1-1.7 px across (semi-axis); a start thinner than this, from a region of one or two pixel
+#: rows, would put the rays across the dot's width all at its centre line.
+MIN_START_MINOR = 0.7
 _COS = np.cos(2.0 * np.pi * np.arange(RAYS) / RAYS)
 _SIN = np.sin(2.0 * np.pi * np.arange(RAYS) / RAYS)
 
@@ -787,16 +791,19 @@ def refine_centres(bright: np.ndarray, x, y, major, minor, angle, start=None, fl
 
 
 @njit(**JIT)
-def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat):
+def _from_candidates(img, sx, sy, sr, sb, sth, fx, fy, fmaj, fmin, fang, arcs, out, flat):
     rmax = 1.0
     for i in range(len(sx)):
         rmax = max(rmax, sr[i], fmaj[i] / 2.0, fmin[i] / 2.0)
     buf, box = _scratch(rmax)
     quality = out.shape[1] >= 10        # the caller asked for how each edge looked (edge_ellipses)
     for i in range(len(sx)):
+        # The rays start on the candidate's circle, or on the start ellipse given (semi-axes sr >= sb).
         r0 = max(sr[i], 1.0)
+        rb = r0 if sb[i] >= sr[i] else max(sb[i], MIN_START_MINOR)
         out[i, :] = 0.0
-        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, r0, 0.0, buf, box, arcs[i] > 0.0, 2 if flat else 0)
+        dx, dy, clean, spread, n = _fit_edge(img, sx[i], sy[i], r0, rb, sth[i], buf, box, arcs[i] > 0.0,
+                                             2 if flat else 0)
         if not clean:
             continue
         # How the edge looks (the edge stage's inputs), read before the check below reuses the buffers: its
@@ -811,9 +818,9 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
         # The conic again on the points the last round kept, for its axes as well as its centre.
         x0, y0, ok, z = _conic_solve(buf[3], buf[4], buf[6], r0, buf[5])
         a, b, th = _conic_axes(z, x0, y0)
-        # Within a candidate radius of the candidate, and no larger than the rays reach (REACH px either
-        # side of the candidate's circle: a conic much larger is extrapolated from an arc).
-        if not (ok and b > 0.0 and math.hypot(x0, y0) * r0 <= max(r0, 1.5)
+        # Within a candidate radius (the start's minor semi-axis) of the candidate, and no larger than the
+        # rays reach (REACH px either side of the start: a conic much larger is extrapolated from an arc).
+        if not (ok and b > 0.0 and math.hypot(x0, y0) * r0 <= max(rb, 1.5)
                 and 2.0 * a * r0 <= 2.0 * (r0 + REACH) + 1.0):
             continue
         if fmaj[i] > 0.0:
@@ -827,7 +834,7 @@ def _from_candidates(img, sx, sy, sr, fx, fy, fmaj, fmin, fang, arcs, out, flat)
             out[i, 6], out[i, 7], out[i, 8], out[i, 9] = spread, n / RAYS, med, low
 
 
-def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=False, quality=False):
+def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=False, quality=False, start=None):
     """Ellipses of dots found from their painted edge alone, around candidate centres.
 
     For a candidate whose intensity measurement was drawn off to a larger dark
@@ -857,6 +864,10 @@ def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=F
         Also return how the edge looked (four more columns: its points' robust scatter about
         the conic, px; the share of the rays that found it; the median and the weakest
         gradient peak of those rays, grey levels a px).  Zeros where ``clean`` is 0.
+    start : tuple of array_like, optional
+        ``(minor, angle)``: the rays start on the ellipse of semi-axes ``radius`` and ``minor``
+        (px, at least :data:`MIN_START_MINOR`) whose major axis is at ``angle`` (radians), not on
+        the circle; the edge's centre must then lie within ``max(minor, 1.5)`` px of ``(x, y)``.
 
     Returns
     -------
@@ -868,6 +879,9 @@ def edge_ellipses(bright: np.ndarray, x, y, radius, fits=None, arcs=None, flat=F
     """
     args = [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in (x, y, radius)]
     n = len(args[0])
+    if start is None:
+        start = (args[2], np.zeros(n))
+    args += [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in start]
     if fits is None:
         fits = (np.zeros(n),) * 5
     args += [np.ascontiguousarray(np.asarray(v, float)).reshape(-1) for v in fits]

@@ -42,6 +42,12 @@ FIT_FEATURE_NAMES = ("s1_logit", "log_cnr", "log_major", "axis_ratio", "line_rms
 #: How the edge of an ellipse found from its candidate's edge looked (the edge stage's own inputs,
 #: :func:`.detector._edge_quality`).
 EDGE_FEATURE_NAMES = ("edge_scatter", "edge_rays", "log_edge_noise", "edge_contrast", "edge_weakest")
+#: What the orphan gate sees of a threshold component about a candidate no believed fit explains
+#: (:func:`.detector.orphan_features`): its area (log), semi-axes, axis ratio and fill, its height over the
+#: threshold at which it merged (in the image's noise), its peak grey level (a 255th), the noise (log), and its
+#: candidate's stage-1 logit, radius, whether it is a narrower-DoG candidate, and stage 1's features.
+ORPHAN_FEATURE_NAMES = ("log_area", "comp_a", "comp_b", "comp_ratio", "comp_fill", "height", "peak", "log_noise",
+                        "s1_logit", "radius", "thin") + FEATURE_NAMES
 #: Stage-1 probability below which a candidate is not measured at all.
 STAGE1_GATE = 0.15
 
@@ -90,6 +96,9 @@ class BlobModel:
     edge: MLP | None = None
     #: Step 9's correction of the kept detections' centres (:mod:`.centre_net`); None: none.
     centre: CentreNet | None = None
+    #: The orphan gate: which threshold components about candidates no believed fit explains are worth step 5's
+    #: edge search (logit >= 0; :func:`.detector._with_orphans`), from :data:`ORPHAN_FEATURE_NAMES`; None: all.
+    orphan: MLP | None = None
 
     def save(self, path) -> None:
         arrays = self.stage1.arrays("s1_")
@@ -97,6 +106,9 @@ class BlobModel:
             arrays.update(self.stage2.arrays("s2_"))
         if self.edge is not None:
             arrays.update(self.edge.arrays("se_"))
+        if self.orphan is not None:
+            arrays.update(self.orphan.arrays("so_"))
+            arrays["orphan_feature_names"] = np.array(ORPHAN_FEATURE_NAMES)
         if self.centre is not None:
             arrays.update(self.centre.arrays("sc_"))
             arrays["centre_grid"] = np.array([centre_net.GRID, centre_net.MARGIN, centre_net.N_INPUTS], np.float64)
@@ -124,7 +136,13 @@ class BlobModel:
             centre = CentreNet.from_arrays(z, "sc_")
         s2 = MLP.from_arrays(z, "s2_") if "s2_w1" in z else None
         se = MLP.from_arrays(z, "se_") if "se_w1" in z else None
-        return cls(MLP.from_arrays(z, "s1_"), s2, se, centre)
+        so = None
+        if "so_w1" in z:
+            if tuple(str(n) for n in z["orphan_feature_names"]) != ORPHAN_FEATURE_NAMES:
+                raise CaraError(f"{path}: the blob model's orphan gate was trained on other features; "
+                                "run tools/train_blob_model.py --orphan-only")
+            so = MLP.from_arrays(z, "so_")
+        return cls(MLP.from_arrays(z, "s1_"), s2, se, centre, so)
 
     def edge_features(self, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
         """The edge stage's inputs: stage 2's features ``F``, stage 2's logit of them and how the edge
