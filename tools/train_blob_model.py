@@ -200,20 +200,22 @@ def stage2_examples(data, white: bool, model: BlobModel):
     return np.concatenate(F), np.concatenate(Y).astype(np.float32)
 
 
-def edge_examples(data, white: bool, model: BlobModel):
+def edge_examples(data, white: bool, model: BlobModel, orphans: bool = False):
     """Stage-2 features, edge features and labels of the ellipses found from a candidate's own edge
     (``from_edge``).
 
     Labelled as stage 2's examples; returns the stage-2 features, the edge features
     (:data:`~carapost.core.blobs.model.EDGE_FEATURE_NAMES`), the labels and which examples are usable
-    (the others lie on a marker off its centre or near a hidden one).
+    (the others lie on a marker off its centre or near a hidden one).  With ``orphans`` the ellipses of the
+    orphan search are examples too, from every threshold component (no gate: the gate learns from this stage).
     """
     F, Q, Y, U = [], [], [], []
+    ungated = BlobModel(model.stage1, model.stage2, model.edge, model.centre)
     for s in data:
         c, bright = find_candidates(as_grey_u8(s.image), white, 2.0, 60.0)
         if len(c.x) == 0:
             continue
-        fit = fit_stage(c, bright, model, orphans=False)     # as the shipped edge stage was trained (session 28)
+        fit = fit_stage(c, bright, ungated, orphans=orphans)
         if fit.from_edge is None:
             continue
         sel = np.flatnonzero(fit.from_edge & fit.ok)
@@ -451,7 +453,7 @@ def _edge_stage(model: BlobModel, white: bool, a) -> MLP:
     """Train the edge stage for ``model`` (``--edge-scenes``) and report it."""
     data = images(white, a.images, a.seed) + sample_takes(white, a.edge_scenes, a.seed)
     data += jaw_takes(white, a.edge_scenes, a.seed)
-    F, Q, Y, U = edge_examples(data, white, model)
+    F, Q, Y, U = edge_examples(data, white, model, a.edge_orphans)
     edge = train_edge(model, F[U], Q[U], Y[U], a.seed + 2, a.edge_fpr)
     pos, neg = (Y > 0.5) & U, (Y < 0.5) & U
     before = rule_keeps(model, F)
@@ -533,6 +535,9 @@ def main(argv=None) -> int:
     ap.add_argument("--edge-fpr", type=float, default=0.5,
                     help="the edge stage's false detections at the default threshold, as a share of those of the "
                          "rule it stands beside (stage 2 less RESCUE_LOGIT)")
+    ap.add_argument("--edge-orphans", action="store_true",
+                    help="the edge stage's examples include the orphan search's ellipses (retrain the orphan gate "
+                         "after it)")
     ap.add_argument("--edge-only", action="store_true",
                     help="keep the stages 1 and 2 in --out and (re)train only the edge stage")
     ap.add_argument("--orphan-scenes", type=int, default=0,
