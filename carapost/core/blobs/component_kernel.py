@@ -30,19 +30,24 @@ def _grow(img, x0, y0, w, h, t, state, region, n, done, pending, npend, limit):
     ``state`` per window pixel: 0 not seen, 1 in the region, 2 seen below an earlier threshold (also
     listed in ``pending``, to be looked at again).  ``done`` region pixels have had their
     neighbours looked at.  Stops once the region has more than ``limit`` pixels (the caller then
-    looks no further).  Returns the new ``n``, ``done`` and ``npend``.
+    looks no further).  Returns the new ``n``, ``done``, ``npend`` and the highest grey level of the
+    pixels left out (-1 if none; it may be a pixel the region took in after: never lower than the
+    level at which the region next grows).
     """
     # Pixels left out at a higher threshold may now be in.
     k = 0
+    top = -1
     for i in range(npend):
         p = pending[i]
-        if state[p] == 2 and img[y0 + p // w, x0 + p % w] >= t:
+        v = int(img[y0 + p // w, x0 + p % w])
+        if state[p] == 2 and v >= t:
             state[p] = 1
             region[n] = p
             n += 1
         elif state[p] == 2:
             pending[k] = p
             k += 1
+            top = max(top, v)
     npend = k
     while done < n and n <= limit:
         p = region[done]
@@ -63,7 +68,8 @@ def _grow(img, x0, y0, w, h, t, state, region, n, done, pending, npend, limit):
             q = qy * w + qx
             if state[q] == 1:
                 continue
-            if img[y0 + qy, x0 + qx] >= t:
+            v = int(img[y0 + qy, x0 + qx])
+            if v >= t:
                 state[q] = 1
                 region[n] = q
                 n += 1
@@ -71,7 +77,8 @@ def _grow(img, x0, y0, w, h, t, state, region, n, done, pending, npend, limit):
                 state[q] = 2
                 pending[npend] = q
                 npend += 1
-    return n, done, npend
+                top = max(top, v)
+    return n, done, npend, top
 
 
 @njit(**JIT)
@@ -83,7 +90,8 @@ def threshold_components(img, xs, ys, reach, step, jump, max_area, out):
     img : ndarray (H, W) uint8
         Blobs brighter than their surround.
     xs, ys : ndarray (N,) float64
-        Seeds, px; the region grows from the brightest pixel of the 3x3 about each.
+        Seeds, px; the region grows from the brightest pixel of the 3x3 about each, in the window of
+        half-size ``reach`` about that pixel.
     reach : int
         Half-size of the window searched, px: a region reaching its edge has merged.
     step : int
@@ -103,22 +111,41 @@ def threshold_components(img, xs, ys, reach, step, jump, max_area, out):
     state = np.zeros(side * side, np.uint8)
     region = np.empty(side * side, np.int64)
     pending = np.empty(side * side, np.int64)
+    # Each seed's brightest pixel of its 3x3: the region and its window depend on that pixel alone, so
+    # candidates of one dot (most share it) are grown once.
+    key = np.full(len(xs), -1, np.int64)
     for i in range(len(xs)):
+        ix, iy = int(round(xs[i])), int(round(ys[i]))
+        if ix < 0 or iy < 0 or ix >= w or iy >= h:
+            continue
+        sx, sy, peak = ix, iy, -1
+        for yy in range(max(iy - 1, 0), min(iy + 2, h)):
+            for xx in range(max(ix - 1, 0), min(ix + 2, w)):
+                if img[yy, xx] > peak:
+                    sx, sy, peak = xx, yy, int(img[yy, xx])
+        key[i] = sy * w + sx
+    order = np.argsort(key)
+    prev = -1
+    for q in range(len(xs)):
+        i = order[q]
+        if key[i] >= 0 and key[i] == prev:
+            for c in range(out.shape[1]):
+                out[i, c] = out[order[q - 1], c]
+            continue
+        prev = key[i]
         for c in range(out.shape[1]):
             out[i, c] = 0.0
-        ix, iy = int(round(xs[i])), int(round(ys[i]))
-        x0, y0 = max(ix - reach, 0), max(iy - reach, 0)
-        x1, y1 = min(ix + reach + 1, w), min(iy + reach + 1, h)
+        if key[i] < 0:
+            continue
+        sy, sx = key[i] // w, key[i] % w
+        peak = int(img[sy, sx])
+        x0, y0 = max(sx - reach, 0), max(sy - reach, 0)
+        x1, y1 = min(sx + reach + 1, w), min(sy + reach + 1, h)
         ww, hh = x1 - x0, y1 - y0
-        if ww < 3 or hh < 3 or ix < 0 or iy < 0 or ix >= w or iy >= h:
+        if ww < 3 or hh < 3:
             continue
         for p in range(ww * hh):
             state[p] = 0
-        sx, sy, peak = ix, iy, -1
-        for yy in range(max(iy - 1, y0), min(iy + 2, y1)):
-            for xx in range(max(ix - 1, x0), min(ix + 2, x1)):
-                if img[yy, xx] > peak:
-                    sx, sy, peak = xx, yy, int(img[yy, xx])
         seed = (sy - y0) * ww + (sx - x0)
         state[seed] = 1
         region[0] = seed
@@ -131,7 +158,7 @@ def threshold_components(img, xs, ys, reach, step, jump, max_area, out):
             checked = n
             # Growing past the merge test's bound (or, from the seed, past max_area) is all it needs to know.
             limit = max_area if last == 0 else int(jump * last) + 4
-            n, done, npend = _grow(img, x0, y0, ww, hh, t, state, region, n, done, pending, npend, limit)
+            n, done, npend, top = _grow(img, x0, y0, ww, hh, t, state, region, n, done, pending, npend, limit)
             # Only the window's sides inside the image: a dot at the image's edge has not merged.
             for k in range(checked - 1 if checked == 1 else checked, n):
                 p = region[k]
@@ -147,7 +174,11 @@ def threshold_components(img, xs, ys, reach, step, jump, max_area, out):
                 last = 0
                 break
             last = n
+            # The thresholds above the brightest pixel left out change nothing: on to the first at or under it
+            # (the same grid of steps from the peak).
             t -= step
+            if top < t:
+                t = peak - step * ((peak - top + step - 1) // step) if top >= 0 else 0
         if last == 0:
             continue
         sw = swx = swy = 0.0
@@ -184,7 +215,9 @@ def threshold_components(img, xs, ys, reach, step, jump, max_area, out):
         out[i, 5] = 0.5 * math.degrees(math.atan2(2.0 * cxy, cxx - cyy))
         out[i, 6] = last / (math.pi * a * b)
         out[i, 7] = 1.0
-        out[i, 8], out[i, 9], out[i, 10] = peak, t + step, t_merge
+        # The last threshold the region stood at: one step over the merging one, or the lowest over 0.
+        out[i, 8], out[i, 9], out[i, 10] = peak, (t_merge if t_merge > 0 else peak - step * ((peak - 1) // step)) + \
+            (step if t_merge > 0 else 0), t_merge
 
 
 @njit(**JIT)
@@ -201,24 +234,22 @@ def unexplained(cx, cy, cr, fx, fy, fa, fb, fang, near, out):
     for i in range(len(cx)):
         reach = max(reach, cr[i])
     order = np.argsort(fx)
-    xs = np.empty(m)
+    xs, cs, sn, ia, ib = np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m)
     for k in range(m):
-        xs[k] = fx[order[k]]
+        j = order[k]
+        xs[k] = fx[j]
+        cs[k], sn[k] = math.cos(math.radians(fang[j])), math.sin(math.radians(fang[j]))
+        ia[k], ib[k] = 1.0 / max(fa[j], 0.5), 1.0 / max(fb[j], 0.5)
     for i in range(len(cx)):
         out[i] = True
-        lo = np.searchsorted(xs, cx[i] - reach)
         r2 = max(near, cr[i]) ** 2
-        for k in range(lo, m):
+        for k in range(np.searchsorted(xs, cx[i] - reach), m):
             if xs[k] > cx[i] + reach:
                 break
             j = order[k]
             dx, dy = cx[i] - fx[j], cy[i] - fy[j]
-            if dx * dx + dy * dy < r2:
-                out[i] = False
-                break
-            c, s = math.cos(math.radians(fang[j])), math.sin(math.radians(fang[j]))
-            u = (c * dx + s * dy) / max(fa[j], 0.5)
-            v = (-s * dx + c * dy) / max(fb[j], 0.5)
-            if u * u + v * v < 1.0:
+            u = (cs[k] * dx + sn[k] * dy) * ia[k]
+            v = (-sn[k] * dx + cs[k] * dy) * ib[k]
+            if dx * dx + dy * dy < r2 or u * u + v * v < 1.0:
                 out[i] = False
                 break
