@@ -561,23 +561,17 @@ def main(argv=None) -> int:
         t = time.time()
         name = "white" if white else "black"
         path = Path(a.out) / f"blob_model_{name}.npz"
-        if a.edge_only:
+        # --edge-only, --orphan-only, --centre-only: that stage alone, over the others in --out.
+        alone = [(attr, title, train_stage) for flag, attr, title, train_stage in (
+            (a.edge_only, "edge", "edge stage", _edge_stage), (a.orphan_only, "orphan", "orphan gate", _orphan_gate),
+            (a.centre_only, "centre", "centre stage", _centre_stage)) if flag]
+        if alone:
             model = BlobModel.load(path)
-            model.edge = _edge_stage(model, white, a)
+            for attr, title, train_stage in alone:
+                setattr(model, attr, train_stage(model, white, a))
+                print(f"{name}: {title} only; {time.time() - t:.0f} s")
             model.save(path)
-            print(f"{name}: edge stage only; {time.time() - t:.0f} s -> {path}")
-            continue
-        if a.orphan_only:
-            model = BlobModel.load(path)
-            model.orphan = _orphan_gate(model, white, a)
-            model.save(path)
-            print(f"{name}: orphan gate only; {time.time() - t:.0f} s -> {path}")
-            continue
-        if a.centre_only:
-            model = BlobModel.load(path)
-            model.centre = _centre_stage(model, white, a)
-            model.save(path)
-            print(f"{name}: centre stage only; {time.time() - t:.0f} s -> {path}")
+            print(f"{name} -> {path}")
             continue
         data = images(white, a.images, a.seed) + sample_takes(white, a.scenes, a.seed)
         data += jaw_takes(white, a.jaw_scenes, a.seed)

@@ -216,8 +216,8 @@ def threshold_components(img, xs, ys, reach, step, jump, max_area, out):
         out[i, 6] = last / (math.pi * a * b)
         out[i, 7] = 1.0
         # The last threshold the region stood at: one step over the merging one, or the lowest over 0.
-        out[i, 8], out[i, 9], out[i, 10] = peak, (t_merge if t_merge > 0 else peak - step * ((peak - 1) // step)) + \
-            (step if t_merge > 0 else 0), t_merge
+        level = t_merge + step if t_merge > 0 else peak - step * ((peak - 1) // step)
+        out[i, 8], out[i, 9], out[i, 10] = peak, level, t_merge
 
 
 @njit(**JIT)
