@@ -51,6 +51,7 @@ def warm_up() -> float:
     """
     import time
 
+    from .component_kernel import COMPONENT_COLUMNS, threshold_components, unexplained
     from .gauss_kernel import fit_gaussians
     from .profile_kernel import fit_profiles
     from .synth import disc_image
@@ -70,4 +71,7 @@ def warm_up() -> float:
     # Step 7 runs only on elongated dots (these are round).
     one = np.array([1.0])
     fit_profiles(img, 30.3 * one, 30.6 * one, 0.0 * one, 8.0 * one, 3.0 * one, np.empty((1, 6)))
+    # The orphan search runs only where a candidate is left unexplained (these dots are all found).
+    threshold_components(img, 30.3 * one, 30.6 * one, 12, 2, 2.0, 120, np.empty((1, len(COMPONENT_COLUMNS))))
+    unexplained(one, one, one, one, one, one, one, one, 1.5, np.empty(1, bool))
     return time.perf_counter() - t
