@@ -137,7 +137,7 @@ def test_the_property_turns_step9_off():
 def test_a_model_without_a_centre_stage_leaves_the_centres(monkeypatch):
     frames = sample_frames(False, seed=7, frames=1, cameras=(1,))
     model = default_model(False)
-    bare = BlobModel(model.stage1, model.stage2, model.edge, orphan=model.orphan)
+    bare = BlobModel(model.stage1, model.stage2, model.edge, orphan=model.orphan, orphan_score=model.orphan_score)
     np.testing.assert_array_equal(detector.detect(frames[0].image, model=bare),
                                   detector.detect(frames[0].image, learned_centres=False))
 

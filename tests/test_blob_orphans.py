@@ -156,3 +156,21 @@ def test_the_gates_training_examples_are_labelled_by_what_the_search_keeps():
     assert X.shape == (len(Y), len(ORPHAN_FEATURE_NAMES)) and len(Y) > 20
     # Temple_L_1's component is one whose search ends as a kept fit (the test above); most are not.
     assert 1 <= Y.sum() <= 0.1 * len(Y)
+
+
+def test_the_white_orphan_scorer_scores_the_searchs_fits_and_round_trips(tmp_path):
+    from carapost.core.blobs.model import BlobModel
+
+    model = default_model(True)
+    assert model.orphan_score is not None and default_model(False).orphan_score is None
+    rng = np.random.default_rng(1)
+    F = rng.normal(size=(6, len(D.FIT_FEATURE_NAMES))).astype(np.float32)
+    Q = rng.normal(size=(6, len(D.EDGE_FEATURE_NAMES))).astype(np.float32)
+    # With the scorer: its own probabilities; without: as the rescue's ellipses are scored.
+    assert np.allclose(model.orphan_scores(F, Q, D.RESCUE_LOGIT),
+                       model.orphan_score.predict(model.edge_features(F, Q)))
+    bare = BlobModel(model.stage1, model.stage2, model.edge, model.centre, model.orphan)
+    assert np.allclose(bare.orphan_scores(F, Q, D.RESCUE_LOGIT), bare.score(F, np.ones(6, bool), D.RESCUE_LOGIT, Q))
+    model.save(tmp_path / "m.npz")
+    back = BlobModel.load(tmp_path / "m.npz")
+    assert np.array_equal(back.orphan_score.w1, model.orphan_score.w1) and back.orphan_score.b2 == model.orphan_score.b2

@@ -488,12 +488,71 @@ def orphan_examples(data, white: bool, model: BlobModel):
             continue
         good, e, ok, F, Q = orphan_fits(c, bright, fin, comp, logit1)
         kept = np.zeros(len(fin), bool)
+        # The edge stage's verdicts, with or without an orphan scorer: the scorer rescores what the gate lets through
+        # (a gate trained on its verdicts let three to five times as many components through, session 44).
         kept[good] = ok & (model.score(F, np.ones(len(F), bool), RESCUE_LOGIT, Q) >= 0.4)
         X.append(orphan_features(c, fin, comp, logit1))
         Y.append(kept)
     if not X:
         return np.zeros((0, len(ORPHAN_FEATURE_NAMES)), np.float32), np.zeros(0, np.float32)
     return np.concatenate(X), np.concatenate(Y).astype(np.float32)
+
+
+def orphan_fit_examples(data, white: bool, model: BlobModel):
+    """The orphan scorer's examples: the edge stage's inputs of the fits the orphan search makes through ``model``'s
+    gate (``ok`` ones), labelled as stage 2's examples, and how the rescue's ellipses would score them (the edge
+    stage). Returns the inputs, the labels, which are usable, and those scores."""
+    X, Y, U, S = [], [], [], []
+    for s in data:
+        c, bright = find_candidates(as_grey_u8(s.image), white, 4.0, 50.0)
+        if len(c.x) == 0:
+            continue
+        logit1 = model.stage1.logit(c.feats)
+        prob1 = 1.0 / (1.0 + np.exp(-np.clip(logit1, -30, 30)))
+        fitted = fit_stage(c, bright, model, orphans=False)
+        fin, comp = orphan_components(fitted, c, bright, model, prob1)
+        if model.orphan is not None and len(fin):
+            look = model.orphan.logit(orphan_features(c, fin, comp, logit1)) >= 0.0
+            fin, comp = fin[look], comp[look]
+        if len(fin) == 0:
+            continue
+        good, e, ok, F, Q = orphan_fits(c, bright, fin, comp, logit1)
+        if not ok.any():
+            continue
+        e, F, Q = e[ok], F[ok], Q[ok]
+        # Labelled where detect() puts them (step 5 along their own normals).
+        x, y = _refine_edge_ellipses(bright, e[:, 0], e[:, 1], e[:, 2], e[:, 3], e[:, 4], not white)
+        pos, use = _labels(np.stack([x, y], 1), s, np.full(len(x), 1.0))
+        X.append(model.edge_features(F, Q))
+        Y.append(pos)
+        U.append(use)
+        S.append(model.score(F, np.ones(len(F), bool), RESCUE_LOGIT, Q))
+    if not X:
+        return np.zeros((0, 0), np.float32), np.zeros(0, np.float32), np.zeros(0, bool), np.zeros(0)
+    return np.concatenate(X), np.concatenate(Y).astype(np.float32), np.concatenate(U), np.concatenate(S)
+
+
+def _orphan_scorer(model: BlobModel, white: bool, a) -> MLP:
+    """Train the orphan scorer for ``model`` (``--orphan-scorer-scenes``) and report it.
+
+    Trained on the gated fits of N scenes (seeds of ``orphan_takes(seed + 2)``); its threshold is set on the fits of
+    N / 2 other scenes (``orphan_takes(seed + 4)``), held back from the training, so that it keeps as many of their
+    fits off every dot as the edge stage does: it may only keep more of the dots.
+    """
+    X, Y, U, _ = orphan_fit_examples(orphan_takes(white, a.orphan_scorer_scenes, a.seed + 2), white, model)
+    scorer = train(X[U], Y[U], a.seed + 6, hidden=8)
+    Xc, Yc, Uc, Sc = orphan_fit_examples(orphan_takes(white, max(1, a.orphan_scorer_scenes // 2), a.seed + 4), white,
+                                         model)
+    neg, pos = (Yc < 0.5) & Uc, (Yc > 0.5) & Uc
+    kept = int((Sc[neg] >= 0.4).sum())
+    z = np.sort(scorer.logit(Xc[neg]))[::-1]
+    # Between the kept-th and the next negative's logits, so that as many stay over the threshold.
+    thr = 0.5 * (z[kept - 1] + z[kept]) if 0 < kept < len(z) else (z[0] + 1.0 if kept == 0 else z[-1] - 1.0)
+    scorer.b2 = float(scorer.b2 - thr + AT)
+    print(f"orphan scorer: {int(U.sum())} training fits, {int(Uc.sum())} held back; at 0.4 on those held back: on a dot "
+          f"{(Sc[pos] >= 0.4).sum()} -> {(scorer.predict(Xc[pos]) >= 0.4).sum()} of {int(pos.sum())}, off every dot "
+          f"{kept} -> {int((scorer.predict(Xc[neg]) >= 0.4).sum())}")
+    return scorer
 
 
 def _orphan_gate(model: BlobModel, white: bool, a) -> MLP:
@@ -543,6 +602,12 @@ def main(argv=None) -> int:
     ap.add_argument("--orphan-scenes", type=int, default=0,
                     help="train the orphan gate too, on the threshold components of this many sample-take scenes "
                          "(and a third as many jaw-open ones) per colour (0: no gate; every component is searched)")
+    ap.add_argument("--orphan-scorer-scenes", type=int, default=0,
+                    help="train the orphan scorer too, on the orphan search's fits of this many sample-take scenes "
+                         "(and half as many held back for its threshold) per colour (0: none; its fits are scored "
+                         "by the edge stage)")
+    ap.add_argument("--orphan-scorer-only", action="store_true",
+                    help="keep the other stages in --out and (re)train only the orphan scorer")
     ap.add_argument("--orphan-only", action="store_true",
                     help="keep the other stages in --out and (re)train only the orphan gate")
     ap.add_argument("--centre-scenes", type=int, default=0,
@@ -564,6 +629,7 @@ def main(argv=None) -> int:
         # --edge-only, --orphan-only, --centre-only: that stage alone, over the others in --out.
         alone = [(attr, title, train_stage) for flag, attr, title, train_stage in (
             (a.edge_only, "edge", "edge stage", _edge_stage), (a.orphan_only, "orphan", "orphan gate", _orphan_gate),
+            (a.orphan_scorer_only, "orphan_score", "orphan scorer", _orphan_scorer),
             (a.centre_only, "centre", "centre stage", _centre_stage)) if flag]
         if alone:
             model = BlobModel.load(path)
@@ -591,6 +657,8 @@ def main(argv=None) -> int:
             model.edge = _edge_stage(model, white, a)
         if a.orphan_scenes:
             model.orphan = _orphan_gate(model, white, a)
+        if a.orphan_scorer_scenes:
+            model.orphan_score = _orphan_scorer(model, white, a)
         if a.centre_scenes:
             model.centre = _centre_stage(model, white, a)
         model.save(path)

@@ -500,6 +500,8 @@ class Fitted:
     from_edge: np.ndarray | None = None  #: the ellipse is the candidate's own edge (:func:`_rescue_drifted`)
     #: (N, len(EDGE_FEATURE_NAMES)) how that edge looked (:func:`_edge_quality`; NaN for the other fits)
     edge_feats: np.ndarray | None = None
+    #: the fit is the orphan search's (:func:`_with_orphans`; scored by :meth:`~.model.BlobModel.orphan_scores`)
+    orphan: np.ndarray | None = None
 
 
 def _fit_features(cand: Candidates, sel, logit1, x, y, major, minor, extra, rescued) -> np.ndarray:
@@ -673,7 +675,8 @@ def _with_orphans(fitted: Fitted, cand: Candidates, bright: np.ndarray, model: B
                   add(fitted.minor, e[:, 3]), add(fitted.angle, e[:, 4]), add(fitted.ok, ok),
                   add(fitted.prob1, prob1[fin]), add(fitted.feats, F),
                   tuple(add(a, b) for a, b in zip(fitted.start, (cand.x[fin], cand.y[fin], cand.radius[fin]))),
-                  add(fitted.from_edge, np.ones(len(fin), bool)), add(fitted.edge_feats, Q))
+                  add(fitted.from_edge, np.ones(len(fin), bool)), add(fitted.edge_feats, Q),
+                  np.concatenate([np.zeros(len(fitted.x), bool), np.ones(len(fin), bool)]))
 
 
 def _f64(v) -> np.ndarray:
@@ -892,6 +895,9 @@ def detect(image, white: bool = False, threshold: float = 0.4, min_major: float 
         # An ellipse from a candidate's own edge is a second guess: stage 2 less RESCUE_LOGIT, or the edge
         # stage's score where that is higher (:meth:`~.model.BlobModel.score`).
         prob = model.score(fitted.feats, fitted.from_edge, RESCUE_LOGIT, fitted.edge_feats)
+        if fitted.orphan is not None and fitted.orphan.any():
+            prob[fitted.orphan] = model.orphan_scores(fitted.feats[fitted.orphan], fitted.edge_feats[fitted.orphan],
+                                                       RESCUE_LOGIT)
     else:
         prob = fitted.prob1
     ok = fitted.ok & (prob >= max(float(threshold), 1e-6))

@@ -99,6 +99,9 @@ class BlobModel:
     #: The orphan gate: which threshold components about candidates no believed fit explains are worth step 5's
     #: edge search (logit >= 0; :func:`.detector._with_orphans`), from :data:`ORPHAN_FEATURE_NAMES`; None: all.
     orphan: MLP | None = None
+    #: Scores the orphan search's fits (:meth:`orphan_scores`) from the edge stage's inputs, trained on such fits
+    #: alone (white, session 44); None: they are scored as the rescue's ellipses are (:meth:`score`).
+    orphan_score: MLP | None = None
 
     def save(self, path) -> None:
         arrays = self.stage1.arrays("s1_")
@@ -106,6 +109,8 @@ class BlobModel:
             arrays.update(self.stage2.arrays("s2_"))
         if self.edge is not None:
             arrays.update(self.edge.arrays("se_"))
+        if self.orphan_score is not None:
+            arrays.update(self.orphan_score.arrays("sq_"))
         if self.orphan is not None:
             arrays.update(self.orphan.arrays("so_"))
             arrays["orphan_feature_names"] = np.array(ORPHAN_FEATURE_NAMES)
@@ -142,13 +147,21 @@ class BlobModel:
                 raise CaraError(f"{path}: the blob model's orphan gate was trained on other features; "
                                 "run tools/train_blob_model.py --orphan-only")
             so = MLP.from_arrays(z, "so_")
-        return cls(MLP.from_arrays(z, "s1_"), s2, se, centre, so)
+        sq = MLP.from_arrays(z, "sq_") if "sq_w1" in z else None
+        return cls(MLP.from_arrays(z, "s1_"), s2, se, centre, so, sq)
 
     def edge_features(self, F: np.ndarray, Q: np.ndarray) -> np.ndarray:
         """The edge stage's inputs: stage 2's features ``F``, stage 2's logit of them and how the edge
         looked (``Q``, :data:`EDGE_FEATURE_NAMES`)."""
         return np.concatenate([F, self.stage2.logit(F)[:, None].astype(np.float32), np.asarray(Q, np.float32)],
                               axis=1)
+
+    def orphan_scores(self, F: np.ndarray, Q: np.ndarray, rescue_logit: float) -> np.ndarray:
+        """The scores of the orphan search's fits (stage-2 features ``F``, edge features ``Q``): the orphan scorer's,
+        or without one as the rescue's ellipses are scored (:meth:`score`)."""
+        if self.orphan_score is None:
+            return self.score(F, np.ones(len(F), bool), rescue_logit, Q)
+        return self.orphan_score.predict(self.edge_features(F, Q))
 
     def score(self, F: np.ndarray, from_edge: np.ndarray | None, rescue_logit: float,
               Q: np.ndarray | None = None) -> np.ndarray:
