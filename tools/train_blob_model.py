@@ -471,21 +471,29 @@ def orphan_takes(white: bool, scenes: int, seed: int):
     return out + _scenes(white, 4500 + 10 * seed, max(1, scenes // 3), rng, (35, 160), jaw_open=2)
 
 
-def orphan_examples(data, white: bool, model: BlobModel):
-    """The orphan gate's inputs of every threshold component the detector finds about the candidates no believed
-    fit explains, and whether step 5's search from it ends as a fit that the detector keeps at the default
-    threshold (clean, thin, ``ok``, scored 0.4 or more: what the gate must let through)."""
-    X, Y = [], []
+def _orphan_components(data, white: bool, model: BlobModel, gated: bool):
+    """Per image of ``data``: the image, its candidates, "bright blob" image and stage-1 logits, and the candidates
+    and threshold components the orphan search looks at (through ``model``'s gate when ``gated``)."""
     for s in data:
         c, bright = find_candidates(as_grey_u8(s.image), white, 4.0, 50.0)
         if len(c.x) == 0:
             continue
         logit1 = model.stage1.logit(c.feats)
         prob1 = 1.0 / (1.0 + np.exp(-np.clip(logit1, -30, 30)))
-        fitted = fit_stage(c, bright, model, orphans=False)
-        fin, comp = orphan_components(fitted, c, bright, model, prob1)
-        if len(fin) == 0:
-            continue
+        fin, comp = orphan_components(fit_stage(c, bright, model, orphans=False), c, bright, model, prob1)
+        if gated and model.orphan is not None and len(fin):
+            look = model.orphan.logit(orphan_features(c, fin, comp, logit1)) >= 0.0
+            fin, comp = fin[look], comp[look]
+        if len(fin):
+            yield s, c, bright, logit1, fin, comp
+
+
+def orphan_examples(data, white: bool, model: BlobModel):
+    """The orphan gate's inputs of every threshold component the detector finds about the candidates no believed
+    fit explains, and whether step 5's search from it ends as a fit that the detector keeps at the default
+    threshold (clean, thin, ``ok``, scored 0.4 or more: what the gate must let through)."""
+    X, Y = [], []
+    for _, c, bright, logit1, fin, comp in _orphan_components(data, white, model, gated=False):
         good, e, ok, F, Q = orphan_fits(c, bright, fin, comp, logit1)
         kept = np.zeros(len(fin), bool)
         # The edge stage's verdicts, with or without an orphan scorer: the scorer rescores what the gate lets through
@@ -503,19 +511,7 @@ def orphan_fit_examples(data, white: bool, model: BlobModel):
     gate (``ok`` ones), labelled as stage 2's examples, and how the rescue's ellipses would score them (the edge
     stage). Returns the inputs, the labels, which are usable, and those scores."""
     X, Y, U, S = [], [], [], []
-    for s in data:
-        c, bright = find_candidates(as_grey_u8(s.image), white, 4.0, 50.0)
-        if len(c.x) == 0:
-            continue
-        logit1 = model.stage1.logit(c.feats)
-        prob1 = 1.0 / (1.0 + np.exp(-np.clip(logit1, -30, 30)))
-        fitted = fit_stage(c, bright, model, orphans=False)
-        fin, comp = orphan_components(fitted, c, bright, model, prob1)
-        if model.orphan is not None and len(fin):
-            look = model.orphan.logit(orphan_features(c, fin, comp, logit1)) >= 0.0
-            fin, comp = fin[look], comp[look]
-        if len(fin) == 0:
-            continue
+    for s, c, bright, logit1, fin, comp in _orphan_components(data, white, model, gated=True):
         good, e, ok, F, Q = orphan_fits(c, bright, fin, comp, logit1)
         if not ok.any():
             continue
