@@ -154,19 +154,20 @@ def threshold_components(img, xs, ys, reach, step, jump, max_area, out):
         t = peak
         t_merge = 0
         touches = False
+        checked = 0             # region pixels already tested against the window's sides
         while t > 0:
-            checked = n
             # Growing past the merge test's bound (or, from the seed, past max_area) is all it needs to know.
             limit = max_area if last == 0 else int(jump * last) + 4
             n, done, npend, top = _grow(img, x0, y0, ww, hh, t, state, region, n, done, pending, npend, limit)
             # Only the window's sides inside the image: a dot at the image's edge has not merged.
-            for k in range(checked - 1 if checked == 1 else checked, n):
+            for k in range(checked, n):
                 p = region[k]
                 px, py = p % ww, p // ww
                 if (px == 0 and x0 > 0 or py == 0 and y0 > 0 or px == ww - 1 and x1 < w
                         or py == hh - 1 and y1 < h):
                     touches = True
                     break
+            checked = n
             if last > 0 and (n > jump * last + 4 or touches):
                 t_merge = t
                 break

@@ -582,7 +582,7 @@ def orphan_components(fitted: Fitted, cand: Candidates, bright: np.ndarray, mode
     :func:`.component_kernel.threshold_components` (:data:`.component_kernel.COMPONENT_COLUMNS`), one
     a region (several candidates of one dot find the same), only regions of plausible size.
     """
-    fin = np.flatnonzero((cand.level == cand.level.min()) & (prob1 >= ORPHAN_GATE)) if len(cand.x) else []
+    fin = np.flatnonzero((cand.level == cand.level.min()) & (prob1 >= ORPHAN_GATE)) if len(cand.x) else np.zeros(0, int)
     if len(fin) == 0:
         return np.zeros(0, np.int64), np.zeros((0, len(COMPONENT_COLUMNS)))
     believed = np.flatnonzero(fitted.ok)
